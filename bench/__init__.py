@@ -1,0 +1,1 @@
+"""Benchmarks (`make bench`): each module prints a table; figures are kept in BENCHMARKS.md."""

@@ -1,0 +1,1 @@
+"""Ground-control station: mission model, CLI, orchestration of planner, fleet and recording."""

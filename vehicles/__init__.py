@@ -1,0 +1,1 @@
+"""Simulated vehicles: MAVLink autopilot stand-ins with noisy point-mass dynamics (no planner)."""

@@ -1,0 +1,121 @@
+"""Sampled checks of the paper's guarantees (theorems 3-5, objectives 1-3; DESIGN 3.4 and 5).
+
+From positions of N UAVs at T instants (virtual targets now, flown tracks later) compute, per
+sample: the smallest horizontal UAV-UAV distance (theorem 4 promises >= 2 rho_c for the virtual
+targets), the smallest UAV-obstacle distance (theorem 3: >= rho_c) and whether every UAV has a
+multi-hop radio path, every hop no longer than the radio range, to a base station (theorem 5,
+eqs. 7-8). Distances equal to the range count as links, with DISTANCE_TOLERANCE (1e-6 m) to
+absorb rounding. Everything is vectorised over samples; memory is bounded by working through
+the samples in chunks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from planner.formation import DISTANCE_TOLERANCE
+from planner.obstacles import Obstacles
+
+# Work on at most this many (sample, node, node) cells at once.
+_CHUNK_CELLS = 2_000_000
+
+
+@dataclass(frozen=True, eq=False)
+class GuaranteeSamples:
+    """Per-sample guarantee metrics, each indexed by sample (T,)."""
+
+    min_uav_uav_m: np.ndarray  # (T,) smallest pairwise distance; inf with one UAV
+    min_uav_obstacle_m: np.ndarray  # (T,) inf without obstacles; 0 inside a solid one
+    connected: np.ndarray  # (T,) bool: every UAV reaches a base station
+    max_hops: np.ndarray  # (T,) int: hops of the worst-connected UAV, -1 if one is cut off
+    hops: np.ndarray  # (T, N) int: hops from each UAV to its nearest base station, -1 if none
+
+    def summary(self) -> dict:
+        """Whole-run figures: minima (None when there is nothing to measure) and fractions."""
+
+        def finite_min(values: np.ndarray) -> float | None:
+            if values.size == 0 or not np.isfinite(values).any():
+                return None
+            return float(np.min(values))
+
+        samples = int(self.connected.size)
+        return {
+            "samples": samples,
+            "min_uav_uav_m": finite_min(self.min_uav_uav_m),
+            "min_uav_obstacle_m": finite_min(self.min_uav_obstacle_m),
+            "connected_fraction": float(self.connected.mean()) if samples else None,
+            "max_hops": int(self.max_hops.max()) if samples else None,
+        }
+
+
+def _chunk_metrics(positions: np.ndarray, base_stations: np.ndarray, radio_range: float):
+    """Smallest UAV-UAV distance (T,) and hop counts (T, N) of a chunk of samples.
+
+    Hops: breadth-first search run on all samples at once; the frontier (T, N) grows through
+    the UAV-UAV adjacency (T, N, N) until no sample gains a UAV. -1 = no path to a station.
+    """
+    samples, count = positions.shape[:2]
+    limit = (radio_range + DISTANCE_TOLERANCE) ** 2
+    to_base = positions[:, :, None, :] - base_stations[None, None, :, :]
+    frontier = (np.einsum("tnbd,tnbd->tnb", to_base, to_base) <= limit).any(axis=2)
+    hops = np.where(frontier, 1, -1)
+    between = positions[:, :, None, :] - positions[:, None, :, :]
+    squared = np.einsum("tijd,tijd->tij", between, between)
+    adjacency = (squared <= limit).astype(np.float32)
+    squared[:, np.arange(count), np.arange(count)] = np.inf
+    closest = np.sqrt(squared.min(axis=(1, 2))) if count > 1 else np.full(samples, np.inf)
+    reached = frontier.copy()
+    level = 1
+    while frontier.any():
+        level += 1
+        heard = (adjacency @ frontier.astype(np.float32)[..., None])[..., 0] > 0
+        frontier = heard & ~reached
+        reached |= frontier
+        hops[frontier] = level
+    return closest, hops
+
+
+def check_positions(
+    positions: np.ndarray,
+    obstacles: Obstacles,
+    base_stations: np.ndarray,
+    radio_range: float,
+) -> GuaranteeSamples:
+    """Guarantee metrics of UAV positions (T, N, 2) (horizontal; extra columns are ignored).
+
+    `base_stations` (B, 2) are A, B and the mission's extra ones: the ground network joins them,
+    so reaching any of them is enough (eq. 3 with more stations).
+    """
+    positions = np.asarray(positions, dtype=float)
+    if positions.ndim == 2:
+        positions = positions[None]
+    if positions.ndim != 3 or positions.shape[2] < 2:
+        raise ValueError("positions must be (T, N, 2)")
+    positions = positions[..., :2]
+    stations = np.asarray(base_stations, dtype=float).reshape(-1, 2)
+    if not radio_range > 0:
+        raise ValueError("radio_range must be > 0")
+    samples, count = positions.shape[:2]
+
+    if count:
+        to_obstacles = obstacles.distance_to_points(positions).min(axis=1)
+    else:
+        to_obstacles = np.full(samples, np.inf)
+
+    closest = np.full(samples, np.inf)
+    hops = np.full((samples, count), -1, dtype=int)
+    step = max(1, _CHUNK_CELLS // max(1, count * (count + len(stations))))
+    for start in range(0, samples, step):
+        chunk = slice(start, start + step)
+        closest[chunk], hops[chunk] = _chunk_metrics(positions[chunk], stations, radio_range)
+    connected = (hops >= 0).all(axis=1)
+    max_hops = np.where(connected, hops.max(axis=1, initial=0), -1)
+    return GuaranteeSamples(
+        min_uav_uav_m=closest,
+        min_uav_obstacle_m=to_obstacles,
+        connected=connected,
+        max_hops=max_hops,
+        hops=hops,
+    )

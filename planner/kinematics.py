@@ -1,0 +1,699 @@
+"""Line-formation kinematics (paper sec. IV-A, eqs. 16-28) and the smoothed reference (DESIGN 3.5).
+
+The commanded speed v(t) is piecewise constant (`SpeedProfile`); S(t) is the distance it makes a
+non-stopping UAV travel (eq. 19) and Phi(s) its inverse (eqs. 20-22). A `LineFormation` turns a
+complete path P_1 = A ... P_K = B, the fleet size N and the spacings dS_c, dS_r (eq. 23) into the
+virtual targets V_n(S) of eq. 27.
+
+Indexing of the thresholds (the paper's L_{k,n}, eq. 24 ff.): ``thresholds[n-1, k]`` is L_{k,n}
+for k = 0 .. K+1, with K the number of path points:
+
+* k = 0: L_0,n = (n-1)(dS_r - dS_c), UAV n leaves its parking slot;
+* k = 1: L_1,n = (n-1) dS_r, it reaches A = P_1 (end of the start row);
+* k = 2 .. K: L_k,n = L_1,n + |P_1 P_2| + ... + |P_{k-1} P_k|, it reaches P_k (k = K: B);
+* k = K+1: L_{K+1},n = L_K,n + (N-n) dS_c, it reaches its arrival slot.
+
+The paper's L_{K+2} (everyone parked) is the same for all UAVs: `total_distance` (eq. 25).
+``segment_directions[k]`` is e_k: e_0 along the start row towards A, e_1 .. e_{K-1} along the
+path segments P_k P_{k+1}, e_K along the goal row away from B; between thresholds k and k+1 the
+UAV moves along e_k.
+
+Where we differ from the paper's text (see DESIGN 3.4):
+
+* parking slots carry the dS_c factor that eq. 17 omits (eq. 27 has it);
+* eq. 27's sum stops at k = K: its k = K+1 term is the final wait and moves nothing;
+* Phi(s) is 0 for s <= 0 unless the profile starts with a zero-speed stretch (then the end of
+  that stretch, eq. 20), and +inf for a distance the profile never reaches (a final speed of 0);
+* V_n is evaluated through the distance travelled beyond A (the paper's S', fig. 3) on the path
+  extended by the two rows; this is eq. 27 rewritten, and the tests compare it with the literal
+  sum of ramps.
+
+The smoothed reference (DESIGN 3.5) is the moving average of V_n(t) over [t - w/2, t + w/2],
+computed in closed form (V_n is piecewise linear in t, its average piecewise quadratic), with
+velocity and acceleration as its exact derivatives. Its deviation from V_n is bounded by
+`smoothing_error_bound`; `safe_speed` and `recommended_window` size speed and window from the
+vehicle's acceleration limit and the error budget (the model is in `safe_speed`'s docstring).
+Computing the reference at t needs the profile up to t + w/2: speed changes must be announced
+at least w/2 ahead (DESIGN 4).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from planner.formation import (
+    DISTANCE_TOLERANCE,
+    ParkingRows,
+    collision_spacing,
+    min_radio_range,
+    radio_spacing,
+)
+
+# Relative margin kept below a pairwise kink distance or a speed limit so that re-deriving a
+# window from a returned speed never lands on the wrong side of a step by rounding.
+_RELATIVE_MARGIN = 1e-9
+
+
+def _readonly(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class SpeedProfile:
+    """Piecewise-constant commanded speed v(t) (assumption 2, eqs. 19-22).
+
+    `speeds[i]` holds on [times[i], times[i+1]) (the last one forever); `times[0] == 0` is the
+    mission start and v(t) = 0 before it.
+    """
+
+    times: np.ndarray  # (C,) start of each constant stretch, s
+    speeds: np.ndarray  # (C,) m/s, >= 0
+
+    def __post_init__(self) -> None:
+        times = np.array(self.times, dtype=float).reshape(-1)
+        speeds = np.array(self.speeds, dtype=float).reshape(-1)
+        if times.size == 0 or times.shape != speeds.shape:
+            raise ValueError("SpeedProfile: times and speeds must be non-empty, of equal length")
+        if times[0] != 0.0:
+            raise ValueError("SpeedProfile: times[0] must be 0.0 (the mission start)")
+        if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+            raise ValueError("SpeedProfile: times must be finite and strictly increasing")
+        if not np.all(np.isfinite(speeds)) or np.any(speeds < 0):
+            raise ValueError("SpeedProfile: speeds must be finite and >= 0")
+        durations = np.diff(times)
+        # S and its time integral at the start of each stretch (exact, piecewise).
+        starts = np.concatenate([[0.0], np.cumsum(speeds[:-1] * durations)])
+        integrals = np.concatenate(
+            [[0.0], np.cumsum(starts[:-1] * durations + 0.5 * speeds[:-1] * durations**2)]
+        )
+        object.__setattr__(self, "times", _readonly(times))
+        object.__setattr__(self, "speeds", _readonly(speeds))
+        object.__setattr__(self, "_starts", _readonly(starts))
+        object.__setattr__(self, "_integrals", _readonly(integrals))
+
+    @classmethod
+    def constant(cls, speed: float) -> SpeedProfile:
+        """v(t) = speed for all t >= 0 (the no speed-change scenario, eq. 22)."""
+        return cls(np.array([0.0]), np.array([float(speed)]))
+
+    @classmethod
+    def from_changes(
+        cls, initial_speed: float, changes: Sequence[tuple[float, float]]
+    ) -> SpeedProfile:
+        """Profile from an initial speed and (effective time s, new speed) changes.
+
+        Effective times must be >= 0 and strictly increasing; a change at 0 replaces the
+        initial speed.
+        """
+        profile = cls.constant(initial_speed)
+        last = -math.inf
+        for effective_s, speed in changes:
+            if not effective_s > last:
+                raise ValueError("speed changes: effective times must be strictly increasing")
+            last = effective_s
+            profile = profile.with_change(effective_s, speed)
+        return profile
+
+    def with_change(self, effective_s: float, speed: float) -> SpeedProfile:
+        """This profile up to `effective_s`, then `speed` forever (later stretches dropped)."""
+        if not (math.isfinite(effective_s) and effective_s >= 0):
+            raise ValueError(f"speed change: effective time must be >= 0, not {effective_s}")
+        keep = self.times < effective_s
+        return SpeedProfile(
+            np.append(self.times[keep], float(effective_s)),
+            np.append(self.speeds[keep], float(speed)),
+        )
+
+    @property
+    def final_speed(self) -> float:
+        """Speed of the last stretch (0 means the formation stops for good)."""
+        return float(self.speeds[-1])
+
+    def _stretch(self, t: np.ndarray) -> np.ndarray:
+        """Index of the stretch holding time t (stretch 0 for t < 0)."""
+        index = np.searchsorted(self.times, t, side="right") - 1
+        return np.clip(index, 0, len(self.times) - 1)
+
+    def speed_at(self, t) -> np.ndarray:
+        """v(t), right-continuous; 0 before the mission start."""
+        t = np.asarray(t, dtype=float)
+        return np.where(t < 0, 0.0, self.speeds[self._stretch(t)])
+
+    def speed_before(self, t) -> np.ndarray:
+        """Left limit v(t-): the speed just before t (0 at and before the mission start)."""
+        t = np.asarray(t, dtype=float)
+        index = np.searchsorted(self.times, t, side="left") - 1
+        return np.where(index < 0, 0.0, self.speeds[np.clip(index, 0, None)])
+
+    def distance(self, t) -> np.ndarray:
+        """S(t) = integral of v from 0 to t (eq. 19); 0 for t <= 0, vectorised over t."""
+        t = np.asarray(t, dtype=float)
+        i = self._stretch(t)
+        speed = self.speeds[i]
+        with np.errstate(invalid="ignore"):
+            travelled = np.where(speed > 0, speed * (t - self.times[i]), 0.0)
+        return np.where(t <= 0, 0.0, self._starts[i] + travelled)
+
+    def distance_integral(self, t) -> np.ndarray:
+        """J(t) = integral of S from 0 to t (piecewise quadratic); 0 for t <= 0."""
+        t = np.asarray(t, dtype=float)
+        i = self._stretch(t)
+        dt = np.maximum(t - self.times[i], 0.0)
+        value = self._integrals[i] + self._starts[i] * dt + 0.5 * self.speeds[i] * dt**2
+        return np.where(t <= 0, 0.0, value)
+
+    def time_at_distance(self, s) -> np.ndarray:
+        """Phi(s) (eqs. 20-22): the time S reaches s, vectorised over s.
+
+        On a zero-speed stretch at distance s it is the end of that stretch (eq. 20); for
+        s < 0 it is 0; for a distance never reached (final speed 0) it is +inf.
+        """
+        s = np.asarray(s, dtype=float)
+        i = np.clip(np.searchsorted(self._starts, s, side="right") - 1, 0, None)
+        speed = self.speeds[i]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(speed > 0, self.times[i] + (s - self._starts[i]) / speed, np.inf)
+        return np.where(s < 0, 0.0, np.maximum(t, 0.0))
+
+
+@dataclass(frozen=True, eq=False)
+class LineFormation:
+    """N virtual UAVs V_n on a complete path with parking rows (eqs. 16-28).
+
+    `fleet_size` is not checked against eq. 28 here (tests may force a fleet too small on
+    purpose); `radio_range` must satisfy eq. 9 so that dS_r >= dS_c.
+    """
+
+    path: np.ndarray  # (K, 2): P_1 = A ... P_K = B
+    fleet_size: int
+    safety_margin: float
+    radio_range: float
+    rows: ParkingRows
+
+    def __post_init__(self) -> None:
+        path = np.array(self.path, dtype=float)
+        if path.ndim != 2 or path.shape[1] != 2 or len(path) < 2:
+            raise ValueError("LineFormation: path must be (K, 2) with K >= 2")
+        if not np.all(np.isfinite(path)):
+            raise ValueError("LineFormation: path must be finite")
+        steps = np.diff(path, axis=0)
+        lengths = np.hypot(steps[:, 0], steps[:, 1])
+        if np.any(lengths <= DISTANCE_TOLERANCE):
+            raise ValueError("LineFormation: consecutive path points must be distinct")
+        if isinstance(self.fleet_size, bool) or int(self.fleet_size) != self.fleet_size:
+            raise ValueError("LineFormation: fleet_size must be an integer")
+        fleet_size = int(self.fleet_size)
+        if fleet_size < 1:
+            raise ValueError("LineFormation: fleet_size must be >= 1")
+        if not self.safety_margin > 0:
+            raise ValueError("LineFormation: safety_margin must be > 0")
+        if self.radio_range < min_radio_range(self.safety_margin) - DISTANCE_TOLERANCE:
+            raise ValueError(
+                "LineFormation: radio_range must be >= 2(1+sqrt 2) safety_margin (eq. 9)"
+            )
+        e0 = np.asarray(self.rows.start_direction, dtype=float)
+        ek = np.asarray(self.rows.goal_direction, dtype=float)
+        e0 = e0 / np.hypot(*e0)
+        ek = ek / np.hypot(*ek)
+
+        cumulative = np.concatenate([[0.0], np.cumsum(lengths)])  # arc length of P_k from A
+        directions = np.concatenate([e0[None], steps / lengths[:, None], ek[None]])
+        spacing_c = collision_spacing(self.safety_margin)
+        spacing_r = radio_spacing(self.safety_margin, self.radio_range)
+        rank = np.arange(fleet_size, dtype=float)  # n - 1
+        count = len(path)
+        thresholds = np.empty((fleet_size, count + 2))
+        thresholds[:, 0] = rank * (spacing_r - spacing_c)
+        thresholds[:, 1 : count + 1] = rank[:, None] * spacing_r + cumulative[None, :]
+        thresholds[:, count + 1] = thresholds[:, count] + (fleet_size - 1 - rank) * spacing_c
+        # Direction of motion after passing m thresholds: 0, e_0, ..., e_K, 0 (index m).
+        phase_directions = np.concatenate([np.zeros((1, 2)), directions, np.zeros((1, 2))])
+        # Velocity jump at each threshold per unit speed: e_k - e_{k-1}; coincident thresholds
+        # (n = 1 starts at A, n = N stops at B) are merged into the first of their group.
+        jumps = np.diff(phase_directions, axis=0)  # (K+2, 2)
+        prefix_l = np.concatenate(
+            [np.zeros((fleet_size, 1, 2)), np.cumsum(thresholds[:, :, None] * jumps, axis=1)],
+            axis=1,
+        )
+
+        object.__setattr__(self, "path", _readonly(path))
+        object.__setattr__(self, "fleet_size", fleet_size)
+        object.__setattr__(self, "_lengths", _readonly(lengths))
+        object.__setattr__(self, "_cumulative", _readonly(cumulative))
+        object.__setattr__(self, "_directions", _readonly(directions))
+        object.__setattr__(self, "_spacing_c", spacing_c)
+        object.__setattr__(self, "_spacing_r", spacing_r)
+        object.__setattr__(self, "_rank", _readonly(rank))
+        object.__setattr__(self, "_thresholds", _readonly(thresholds))
+        object.__setattr__(self, "_phase_directions", _readonly(phase_directions))
+        object.__setattr__(self, "_jumps", _readonly(jumps))
+        object.__setattr__(self, "_prefix_l", _readonly(prefix_l))
+
+    # ----- geometry -------------------------------------------------------------------------
+
+    @property
+    def path_length(self) -> float:
+        """len(P) (eq. 12)."""
+        return float(self._cumulative[-1])
+
+    @property
+    def collision_spacing(self) -> float:
+        """dS_c (eq. 23)."""
+        return self._spacing_c
+
+    @property
+    def radio_spacing(self) -> float:
+        """dS_r (eq. 23)."""
+        return self._spacing_r
+
+    @property
+    def segment_directions(self) -> np.ndarray:
+        """(K+1, 2): e_0 (start row, towards A), e_1 .. e_{K-1} (path), e_K (goal row)."""
+        return self._directions
+
+    @property
+    def thresholds(self) -> np.ndarray:
+        """(N, K+2): L_{k,n} for k = 0 .. K+1 (module docstring), row n-1 for UAV n."""
+        return self._thresholds
+
+    @property
+    def total_distance(self) -> float:
+        """L_{K+2} = len(P) + (N-1) dS_r: distance after which everyone is parked (eq. 25)."""
+        return self.path_length + (self.fleet_size - 1) * self._spacing_r
+
+    @property
+    def start_slots(self) -> np.ndarray:
+        """(N, 2): P_0,n = A - (n-1) dS_c e_0 (eqs. 17, 27)."""
+        return self.path[0] - (self._rank * self._spacing_c)[:, None] * self._directions[0]
+
+    @property
+    def goal_slots(self) -> np.ndarray:
+        """(N, 2): P_{K+1},n = B + (N-n) dS_c e_K (eq. 17 with the dS_c factor)."""
+        behind = self.fleet_size - 1 - self._rank
+        return self.path[-1] + (behind * self._spacing_c)[:, None] * self._directions[-1]
+
+    @property
+    def departure_distance(self) -> np.ndarray:
+        """(N,): L_0,n, the S at which UAV n leaves its parking slot."""
+        return self._thresholds[:, 0]
+
+    @property
+    def arrival_distance(self) -> np.ndarray:
+        """(N,): L_{K+1},n, the S at which UAV n parks on its arrival slot."""
+        return self._thresholds[:, -1]
+
+    # ----- V_n as a function of S -------------------------------------------------------------
+
+    def distance_beyond_start(self, distance) -> np.ndarray:
+        """(..., N): distance travelled beyond A by each UAV (the paper's S', fig. 3).
+
+        Negative on the start row, above len(P) on the goal row.
+        """
+        s = np.asarray(distance, dtype=float)[..., None]
+        behind = self.fleet_size - 1 - self._rank
+        return np.clip(
+            s - self._rank * self._spacing_r,
+            -self._rank * self._spacing_c,
+            self.path_length + behind * self._spacing_c,
+        )
+
+    def positions(self, distance) -> np.ndarray:
+        """V_n at formation distances S (eq. 27): shape S.shape + (N, 2)."""
+        return self._point_at(self.distance_beyond_start(distance))
+
+    def directions(self, distance) -> np.ndarray:
+        """dV_n/dS (right derivative), S.shape + (N, 2): e_k while moving, 0 while parked."""
+        return self._phase_directions[self._passed(distance, strict=False)]
+
+    def phases(self, distance) -> np.ndarray:
+        """S.shape + (N,) int: 0 parked at start, 1 start row, 2 path, 3 goal row, 4 parked."""
+        count = len(self.path)
+        table = np.array([0, 1] + [2] * (count - 1) + [3, 4])
+        return table[self._passed(distance, strict=True)]
+
+    def threshold_times(self, profile: SpeedProfile) -> np.ndarray:
+        """(N, K+2): Phi(L_{k,n}), the time UAV n passes each threshold (eq. 24)."""
+        return profile.time_at_distance(self._thresholds)
+
+    def duration(self, profile: SpeedProfile) -> float:
+        """Mission duration T = Phi(len(P) + (N-1) dS_r) (eq. 25); inf if never reached."""
+        return float(profile.time_at_distance(self.total_distance))
+
+    def _point_at(self, beyond: np.ndarray) -> np.ndarray:
+        """Point at arc length `beyond` from A on the path extended by both rows."""
+        cumulative = self._cumulative
+        segment = np.clip(
+            np.searchsorted(cumulative, beyond, side="right") - 1, 0, len(cumulative) - 2
+        )
+        along = (beyond - cumulative[segment])[..., None]
+        on_path = self.path[segment] + along * self._directions[1:-1][segment]
+        start_row = self.path[0] + beyond[..., None] * self._directions[0]
+        goal_row = self.path[-1] + (beyond - self.path_length)[..., None] * self._directions[-1]
+        return np.where(
+            (beyond < 0)[..., None],
+            start_row,
+            np.where((beyond > self.path_length)[..., None], goal_row, on_path),
+        )
+
+    def _passed(self, distance, strict: bool) -> np.ndarray:
+        """S.shape + (N,): how many thresholds L_{k,n} are below S (strict) or <= S."""
+        s = np.asarray(distance, dtype=float)[..., None]
+        side = "left" if strict else "right"
+        below = np.less if strict else np.less_equal
+        on_path = np.searchsorted(self._cumulative, s - self._rank * self._spacing_r, side=side)
+        departed = below(self._thresholds[:, 0], s)
+        arrived = below(self._thresholds[:, -1], s)
+        # Keep the three comparisons consistent where rounding splits coincident thresholds.
+        on_path = np.where(arrived, len(self._cumulative), np.where(departed, on_path, 0))
+        return departed.astype(int) + on_path + arrived.astype(int)
+
+    def _kinks(self) -> tuple[np.ndarray, np.ndarray]:
+        """Kinks of V_n(S): positions (N, K+2) = thresholds and unit-speed velocity jumps.
+
+        Thresholds that coincide (UAV 1 starts at A, UAV N stops at B) are merged: the first of
+        a group carries the whole jump e_last - e_{first-1}, the others 0.
+        """
+        thresholds = self._thresholds
+        size = thresholds.shape[1]
+        index = np.broadcast_to(np.arange(size), thresholds.shape)
+        new_group = np.ones(thresholds.shape, dtype=bool)
+        new_group[:, 1:] = thresholds[:, 1:] > thresholds[:, :-1]
+        ends_group = np.ones(thresholds.shape, dtype=bool)
+        ends_group[:, :-1] = new_group[:, 1:]
+        last = np.flip(
+            np.minimum.accumulate(np.flip(np.where(ends_group, index, size), axis=1), axis=1),
+            axis=1,
+        )
+        jumps = self._phase_directions[last + 1] - self._phase_directions[index]
+        return thresholds, np.where(new_group[..., None], jumps, 0.0)
+
+
+# ----- smoothed reference (DESIGN 3.5) -----------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """Smoothed targets with feed-forward, each (T, N, 2): m, m/s, m/s^2."""
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+
+
+def _antiderivative(formation: LineFormation, profile: SpeedProfile, times: np.ndarray):
+    """Integral of V_n - P_0,n from -inf to t, (T, N, 2), exact.
+
+    V_n(t) = P_0,n + sum_k jump_k max(S(t) - L_k,n, 0) with jump_k = e_k - e_{k-1} (eq. 27
+    regrouped), and the integral of max(S - L, 0) up to t is J(t) - L t - (J(phi) - L phi)
+    once t > phi = Phi(L), with J the integral of S. The set of passed thresholds is a prefix,
+    so the sums over k are prefix sums gathered at the count of passed thresholds.
+    """
+    thresholds = formation._thresholds
+    crossing = profile.time_at_distance(thresholds)  # (N, K+2)
+    finite = np.isfinite(crossing)
+    safe_crossing = np.where(finite, crossing, 0.0)
+    offsets = np.where(
+        finite, profile.distance_integral(safe_crossing) - thresholds * safe_crossing, 0.0
+    )
+    prefix_a = np.concatenate(
+        [
+            np.zeros((formation.fleet_size, 1, 2)),
+            np.cumsum(offsets[:, :, None] * formation._jumps, axis=1),
+        ],
+        axis=1,
+    )
+    passed = formation._passed(profile.distance(times), strict=True)  # (T, N)
+    uav = np.arange(formation.fleet_size)
+    integral = profile.distance_integral(times)[:, None, None]
+    return (
+        integral * formation._phase_directions[passed]
+        - times[:, None, None] * formation._prefix_l[uav, passed]
+        - prefix_a[uav, passed]
+    )
+
+
+def _velocity(formation: LineFormation, profile: SpeedProfile, times: np.ndarray) -> np.ndarray:
+    """dV_n/dt (right derivative), (T, N, 2)."""
+    distance = profile.distance(times)
+    return profile.speed_at(times)[:, None, None] * formation.directions(distance)
+
+
+def smoothed_reference(
+    formation: LineFormation, profile: SpeedProfile, times, window_s: float
+) -> Reference:
+    """Moving average of V_n(t) over [t - w/2, t + w/2], with its exact derivatives.
+
+    Closed form, vectorised over times and UAVs. The velocity is (V(t+w/2) - V(t-w/2)) / w and
+    the acceleration (V'(t+w/2) - V'(t-w/2)) / w (piecewise constant, right-continuous).
+    `window_s == 0` returns V_n itself with its velocity and zero acceleration.
+    """
+    window_s = float(window_s)
+    if not (math.isfinite(window_s) and window_s >= 0):
+        raise ValueError(f"window_s must be finite and >= 0, not {window_s}")
+    times = np.asarray(times, dtype=float).reshape(-1)
+    if window_s == 0:
+        positions = formation.positions(profile.distance(times))
+        velocities = _velocity(formation, profile, times)
+        return Reference(positions, velocities, np.zeros_like(velocities))
+    # Both window ends in one evaluation: [late..., early...].
+    ends = np.concatenate([times + window_s / 2, times - window_s / 2])
+    count = len(times)
+    integral = _antiderivative(formation, profile, ends)
+    virtual = formation.positions(profile.distance(ends))
+    velocity = _velocity(formation, profile, ends)
+    positions = formation.start_slots[None] + (integral[:count] - integral[count:]) / window_s
+    velocities = (virtual[:count] - virtual[count:]) / window_s
+    accelerations = (velocity[:count] - velocity[count:]) / window_s
+    return Reference(positions, velocities, accelerations)
+
+
+# ----- kink arithmetic shared by the bound, the safe speed and the window ------------------
+
+
+def _row_searchsorted(rows: np.ndarray, queries: np.ndarray, side: str) -> np.ndarray:
+    """np.searchsorted of each row of `queries` (N, Q) in the sorted row of `rows` (N, G)."""
+    count, size = rows.shape
+    low = min(rows.min(), queries.min())
+    band = max(rows.max(), queries.max()) - low + 1.0
+    offsets = np.arange(count)[:, None] * band
+    flat = (rows - low + offsets).ravel()
+    found = np.searchsorted(flat, queries - low + offsets, side=side)
+    return np.clip(found - np.arange(count)[:, None] * size, 0, size)
+
+
+def _bump(offset: np.ndarray, width: float) -> np.ndarray:
+    """Moving-average error of a unit velocity kink at `offset` from it: (w/2 - |x|)^2 / 2w."""
+    return np.maximum(width / 2 - np.abs(offset), 0.0) ** 2 / (2 * width)
+
+
+def _neighbours(positions: np.ndarray, radius: float):
+    """For each kink, indices (N, G, W) of the kinks within `radius` of it, and a validity mask."""
+    low = _row_searchsorted(positions, positions - radius, "left")
+    high = _row_searchsorted(positions, positions + radius, "right")
+    width = max(int((high - low).max()), 1)
+    index = low[..., None] + np.arange(width)
+    valid = index < high[..., None]
+    return np.minimum(index, positions.shape[1] - 1), valid
+
+
+def _gather(values: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """values (N, G) gathered at index (N, G, W)."""
+    count = values.shape[0]
+    return np.take_along_axis(values, index.reshape(count, -1), axis=1).reshape(index.shape)
+
+
+def _max_bump_sum(positions: np.ndarray, weights: np.ndarray, width: float) -> float:
+    """max over x of sum_i weights_i bump(x - positions_i): attained at a kink (convexity)."""
+    if width <= 0 or positions.size == 0:
+        return 0.0
+    index, valid = _neighbours(positions, width / 2)
+    offset = positions[..., None] - _gather(positions, index)
+    total = np.where(valid, _gather(weights, index) * _bump(offset, width), 0.0).sum(axis=-1)
+    return float(total.max())
+
+
+class _JumpSteps:
+    """M(lambda): the largest |sum of velocity jumps| of kinks within a path window lambda.
+
+    Built from every contiguous range of kinks (per row) spanning at most `radius`; M is the
+    running maximum of the ranges' vector sums sorted by span, a right-continuous step
+    function. The reference's acceleration is that sum divided by the window (DESIGN 3.5).
+    """
+
+    def __init__(self, positions: np.ndarray, jumps: np.ndarray, radius: float) -> None:
+        count, size = positions.shape
+        self.radius = radius
+        high = _row_searchsorted(positions, positions + radius, "right")
+        width = max(int((high - np.arange(size)).max()), 1)
+        index = np.arange(size)[None, :, None] + np.arange(width)
+        index = np.broadcast_to(index, (count, size, width))
+        valid = index < high[..., None]
+        index = np.minimum(index, size - 1)
+        cumulative = np.concatenate([np.zeros((count, 1, 2)), np.cumsum(jumps, axis=1)], axis=1)
+        flat = (index + 1).reshape(count, -1, 1)
+        sums = np.take_along_axis(cumulative, flat, axis=1).reshape(count, size, width, 2)
+        sums = sums - cumulative[:, :size, None, :]
+        spans = _gather(positions, index) - positions[..., None]
+        order = np.argsort(spans[valid], kind="stable")
+        self.spans = spans[valid][order]
+        self.largest = np.maximum.accumulate(np.hypot(sums[..., 0], sums[..., 1])[valid][order])
+
+    def __call__(self, widths) -> np.ndarray:
+        """M at each width (widths must not exceed `radius`)."""
+        found = np.searchsorted(self.spans, np.asarray(widths, dtype=float), side="right") - 1
+        return self.largest[np.maximum(found, 0)]
+
+
+def _unit_kinks(formation_or_path) -> tuple[np.ndarray, np.ndarray]:
+    """Kinks along S at unit speed: positions (R, G) sorted per row, velocity jumps (R, G, 2).
+
+    A `LineFormation` gives every UAV's kinks (start, row->path bend, path bends, path->row bend,
+    stop); a bare (K, 2) path gives its interior bends only.
+    """
+    if isinstance(formation_or_path, LineFormation):
+        return formation_or_path._kinks()
+    path = np.asarray(formation_or_path, dtype=float).reshape(-1, 2)
+    steps = np.diff(path, axis=0)
+    lengths = np.hypot(steps[:, 0], steps[:, 1])
+    if np.any(lengths <= DISTANCE_TOLERANCE):
+        raise ValueError("path: consecutive points must be distinct")
+    units = steps / lengths[:, None]
+    return np.cumsum(lengths)[:-1][None], np.diff(units, axis=0)[None]
+
+
+def smoothing_error_bound(
+    formation: LineFormation, profile: SpeedProfile, window_s: float
+) -> float:
+    """Upper bound of |smoothed reference - V_n(t)| over all t and n, metres (DESIGN 3.5).
+
+    V_n(t) is piecewise linear in t; the moving average over a window w deviates from it by
+    sum_i dv_i g(t - t_i) with dv_i the velocity jump at kink t_i and
+    g(x) = (w/2 - |x|)^2 / (2w) (g(0) = w/8). Bounded by sum |dv_i| g(t - t_i), whose maximum is
+    at a kink (each g is convex on either side of its peak), so kinks closer than w add up.
+    Kinks: each UAV's threshold crossings (bends, start, stop; |dv| = v |e_k - e_{k-1}|) and
+    every speed step |v_i - v_{i-1}| while the UAV moves. Coincident kinks are counted
+    separately (conservative).
+    """
+    window_s = float(window_s)
+    if window_s <= 0:
+        return 0.0
+    thresholds, jumps = formation._kinks()
+    crossing = profile.time_at_distance(thresholds)  # (N, K+2)
+    finite = np.isfinite(crossing)
+    safe_crossing = np.where(finite, crossing, 0.0)
+    speed = np.maximum(profile.speed_at(safe_crossing), profile.speed_before(safe_crossing))
+    bend_weights = np.where(finite, speed * np.hypot(jumps[..., 0], jumps[..., 1]), 0.0)
+    step_times = profile.times[1:]
+    step_sizes = np.abs(np.diff(profile.speeds))
+    reached = profile.distance(step_times)[None, :]  # (1, C-1)
+    moving = (thresholds[:, :1] < reached) & (reached <= thresholds[:, -1:])
+    step_weights = np.where(moving, step_sizes[None, :], 0.0)
+    times = np.concatenate(
+        [safe_crossing, np.broadcast_to(step_times, (formation.fleet_size, len(step_times)))],
+        axis=1,
+    )
+    weights = np.concatenate([bend_weights, step_weights], axis=1)
+    # Unreached kinks weigh nothing; park them far away so they never share a window.
+    far = float(times.max()) + 4 * window_s + 1.0
+    times = np.where(weights > 0, times, far)
+    order = np.argsort(times, axis=1, kind="stable")
+    return _max_bump_sum(
+        np.take_along_axis(times, order, axis=1),
+        np.take_along_axis(weights, order, axis=1),
+        window_s,
+    )
+
+
+def _smallest_window(positions, jumps, speed: float, max_acceleration: float) -> float:
+    """Smallest path window lambda with speed^2 M(lambda) / lambda <= a_max.
+
+    Fixed point from M(0): every lambda below the current iterate needs a larger one, so the
+    increasing iteration stops at the smallest admissible window (M only grows with lambda).
+    """
+    factor = speed**2 / max_acceleration
+    radius = factor * float(np.hypot(jumps[..., 0], jumps[..., 1]).max()) * 2.0
+    steps = _JumpSteps(positions, jumps, radius)
+    window = factor * float(steps(0.0))
+    for _ in range(positions.size + 2):
+        if window * 1.01 > steps.radius:  # keep ranges near the window clear of rounding
+            steps = _JumpSteps(positions, jumps, 2.0 * window)
+        needed = factor * float(steps(window))
+        if needed <= window * (1 + _RELATIVE_MARGIN):
+            break
+        window = needed
+    return window
+
+
+def recommended_window(speed: float, max_acceleration: float, formation_or_path=None) -> float:
+    """Smallest smoothing window (s) that keeps the reference's acceleration within a_max.
+
+    The reference's acceleration is the vector sum of the velocity jumps inside the window
+    divided by the window, so at constant `speed` v a path window lambda = v w must satisfy
+    v^2 M(lambda) / lambda <= a_max, M(lambda) the largest |sum of unit jumps e_k - e_{k-1}|
+    within lambda of path (a start or stop is 1, a bend of theta 2 sin(theta/2)). Without a
+    formation or path: one 90-degree bend (the sharpest a valid path has), w = sqrt(2) v / a_max.
+    Size it for v_max: slower speeds and speed steps of at most v_max (each needs v_max / w <=
+    a_max, implied by the start kink) then keep the limit too.
+    """
+    if not max_acceleration > 0:
+        raise ValueError("max_acceleration must be > 0")
+    if speed <= 0:
+        return 0.0
+    if formation_or_path is None:
+        return math.sqrt(2.0) * speed / max_acceleration
+    positions, jumps = _unit_kinks(formation_or_path)
+    if positions.size == 0 or not np.any(np.hypot(jumps[..., 0], jumps[..., 1]) > 0):
+        return 0.0
+    return _smallest_window(positions, jumps, speed, max_acceleration) / speed
+
+
+def safe_speed(formation_or_path, max_acceleration: float, error_budget: float) -> float:
+    """Highest constant formation speed whose smoothed reference meets a_max and the budget, m/s.
+
+    Model (DESIGN 3.5): the reference is the moving average of V_n over a window w. A velocity
+    jump |dv| smoothed over w costs |dv| w / 8 of position error and needs |dv| / w of
+    acceleration, so the smallest error under a_max is |dv|^2 / (8 a_max), with
+    |dv| = 2 v sin(theta/2) at a bend of theta (90 degrees at 10 m/s with a_max = 5: 5 m) and
+    |dv| = v at a start or stop. Kinks closer than the window add up: in the error each
+    contributes |dv| (w/2 - |x|)^2 / 2w at distance x (magnitudes added: conservative), in the
+    acceleration their vector jumps add (a rectangle's corner is two 45-degree kinks 2 rho_c
+    apart). At constant speed both depend on the window's length along the path,
+    lambda = v w: the error E(lambda) grows with lambda, and a window is admissible when
+    v^2 M(lambda) / lambda <= a_max. So lambda* = the largest lambda with
+    E(lambda) <= error_budget, and the answer is sqrt(a_max max(lambda / M(lambda))) over
+    lambda <= lambda* (M steps at the spans of kink ranges: those, and lambda*, are the
+    candidates).
+
+    A `LineFormation` counts every UAV's kinks, the row->path and path->row bends included; a
+    bare (K, 2) path only its interior bends; inf when nothing bends. The result is rounded
+    down by 1e-9 (relative) so that `recommended_window` at this speed stays within the budget.
+    """
+    if not max_acceleration > 0:
+        raise ValueError("max_acceleration must be > 0")
+    if not error_budget > 0:
+        return 0.0
+    positions, jumps = _unit_kinks(formation_or_path)
+    weights = np.hypot(jumps[..., 0], jumps[..., 1])
+    heaviest = float(weights.max()) if weights.size else 0.0
+    if heaviest <= 0:
+        return math.inf
+    # E(lambda) >= heaviest * lambda / 8 (a kink's own bump), so lambda* <= 8 budget / heaviest.
+    low, high = 0.0, 8.0 * error_budget / heaviest
+    if _max_bump_sum(positions, weights, high) <= error_budget:
+        low = high
+    while high - low > 1e-12 * high:
+        middle = 0.5 * (low + high)
+        if _max_bump_sum(positions, weights, middle) <= error_budget:
+            low = middle
+        else:
+            high = middle
+    steps = _JumpSteps(positions, jumps, 1.01 * low)
+    spans = np.unique(steps.spans)
+    candidates = np.concatenate([[low], spans[(spans > 0) & (spans < low)] * (1 - 1e-6)])
+    ratio = float(np.max(candidates / steps(candidates)))
+    return math.sqrt(max_acceleration * ratio) * (1 - _RELATIVE_MARGIN)

@@ -7,6 +7,7 @@ Segments are walls. All queries are vectorised through shapely 2 and an STRtree.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import shapely
@@ -65,6 +66,89 @@ class Obstacles:
         if len(self) == 0:
             return np.full(segments.shape[:-2], np.inf)
         return self._nearest(shapely.linestrings(flat)).reshape(segments.shape[:-2])
+
+    @property
+    def segment_owner(self) -> np.ndarray:
+        """Index into `geometries` of the obstacle each row of `segments` belongs to, (M,)."""
+        counts = [len(p) for p in self.polygons] + [1] * len(self.walls)
+        return np.repeat(np.arange(len(counts)), counts).astype(np.intp)
+
+    @cached_property
+    def _prepared_union(self) -> tuple[shapely.Geometry, ...]:
+        """The obstacles as a few prepared geometries (GEOS indexes them once, so each later
+        query costs about a microsecond per segment): the union of the solids (made valid),
+        the walls as one multi-line, and zero-length walls as points (GEOS's prepared
+        predicates skip a degenerate line)."""
+        parts = []
+        if self.polygons:
+            polygons = self._geometries[: len(self.polygons)]
+            solids = shapely.union_all(shapely.make_valid(polygons))
+            parts.append(solids)
+        if len(self.walls):
+            length = np.hypot(*(self.walls[:, 1] - self.walls[:, 0]).T)
+            proper = length > 0.0
+            if proper.any():
+                parts.append(shapely.multilinestrings(self.walls[proper]))
+            if not proper.all():
+                parts.append(shapely.multipoints(self.walls[~proper, 0]))
+        for part in parts:
+            shapely.prepare(part)
+        return tuple(parts)
+
+    def segments_within(self, segments: np.ndarray, distance: float) -> np.ndarray:
+        """True for each segment (..., 2, 2) that comes within `distance` (inclusive) of an
+        obstacle, or enters a solid one. Vectorised over a prepared union of the obstacles:
+        segments that cross an obstacle are found by a cheap intersection test first, the
+        exact distance test runs only on the others."""
+        segments = np.asarray(segments, float)
+        flat = segments.reshape(-1, 2, 2)
+        hit = np.zeros(len(flat), bool)
+        if len(flat) == 0 or len(self) == 0:
+            return hit.reshape(segments.shape[:-2])
+        lines = shapely.linestrings(flat)
+        for geom in self._prepared_union:
+            rest = np.flatnonzero(~hit)
+            crossing = shapely.intersects(geom, lines[rest])
+            hit[rest[crossing]] = True
+            rest = rest[~crossing]
+            hit[rest] = shapely.dwithin(geom, lines[rest], distance)
+        return hit.reshape(segments.shape[:-2])
+
+    @cached_property
+    def vertex_table(self) -> np.ndarray:
+        """Vertices of every obstacle, (G, V, 2), padded by repeating the last vertex
+        (polygons first, then walls, as in `geometries`)."""
+        rings = list(self.polygons) + list(self.walls)
+        if not rings:
+            return np.zeros((0, 1, 2))
+        sizes = np.array([len(r) for r in rings])
+        offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        index = offsets[:, None] + np.minimum(np.arange(sizes.max()), sizes[:, None] - 1)
+        return np.concatenate(rings)[index]
+
+    @cached_property
+    def hulls(self) -> np.ndarray:
+        """Convex hull of each obstacle (shapely geometries, prepared)."""
+        hulls = shapely.convex_hull(self._geometries)
+        shapely.prepare(hulls)
+        return hulls
+
+    def separated(self, first: np.ndarray, second: np.ndarray, margin: float) -> bool:
+        """True when no curve from `first` to `second` keeps `margin` from every obstacle:
+        the points lie in different connected parts of the free space. Conservative: the
+        margins are polygons inscribed in the round ones, so True is a proof."""
+        if len(self) == 0:
+            return False
+        grown = shapely.union_all(shapely.buffer(self._geometries, margin, quad_segs=4))
+        pts = shapely.points(np.array([first, second], float).reshape(2, 2))
+        if np.any(shapely.contains(grown, pts)):
+            return False  # a point inside a margin: not this test's business
+        holes = [shapely.Polygon(r) for r in shapely.get_rings(shapely.get_parts(grown))]
+        holes = [h for h in holes if h.is_valid]
+        if not holes:
+            return False
+        inside = shapely.contains(np.array(holes, dtype=object)[:, None], pts[None, :])
+        return bool(np.any(inside[:, 0] != inside[:, 1]))
 
     def _nearest(self, geoms: np.ndarray) -> np.ndarray:
         """Distance from each geometry to its nearest obstacle, in input order."""

@@ -1,0 +1,76 @@
+"""`gcs`: the ground-control station's command line (argparse).
+
+Each command group lives in its own module `gcs/cmd_<group>.py` exposing
+`register(subparsers)`: it adds its parser(s) and sets `handler=func` on each leaf, where
+`func(args) -> int` returns the exit status. Adding a group is one line in `GROUPS`.
+
+Exit statuses (CONTRACTS.md): 0 success, 1 the command ran and failed (no valid path, mission
+aborted...), 2 bad input. Bad input (`InputError`, argparse usage errors) is one line on
+stderr, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import os
+import sys
+
+from gcs.errors import EXIT_BAD_INPUT, InputError
+
+#: Command-group modules, each with `register(subparsers)`. Add a group here.
+GROUPS: tuple[str, ...] = ("gcs.cmd_mission", "gcs.cmd_speed", "gcs.cmd_sitl")
+
+
+class UsageError(Exception):
+    """An argparse usage error, reported on one line with exit status 2."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse that raises `UsageError` (one line) instead of printing usage and exiting."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
+
+
+def build_parser() -> ArgumentParser:
+    parser = ArgumentParser(
+        prog="gcs",
+        description="Connectivity-aware ground control for a fleet of UAVs.",
+    )
+    parser.add_argument(
+        "-v", "--verbose", action="count", default=0, help="more log output (-vv: debug)"
+    )
+    groups = parser.add_subparsers(dest="group", metavar="COMMAND", required=True)
+    for name in GROUPS:
+        importlib.import_module(name).register(groups)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Parse `argv`, run the chosen command, return its exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        level = (logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)]
+        logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+        return int(args.handler(args))
+    except InputError as exc:
+        print(exc, file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except UsageError as exc:
+        print(exc, file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("gcs: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # stdout closed early (e.g. `gcs ... | head`): silence the flush at exit too.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,198 @@
+"""`gcs mission check|plan`: validate and plan a mission file, print or write the plan.
+
+`check` does everything `plan` does (so it refuses all that `plan` refuses) and writes nothing.
+Other `gcs mission <command>` modules register through `SUBCOMMANDS`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+
+from gcs.errors import InputError
+from gcs.mission import load_mission
+from gcs.planning import MissionPlan, plan_json, plan_mission
+
+#: Modules adding `gcs mission <command>`, each with `register(mission_subparsers)`.
+SUBCOMMANDS: tuple[str, ...] = ("gcs.cmd_run",)
+
+#: File types `--plot` writes (matplotlib back ends).
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+EXIT_OK, EXIT_NO_PATH = 0, 1
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add `gcs mission` and its commands."""
+    mission = subparsers.add_parser(
+        "mission",
+        help="check, plan and fly a mission file",
+        description="Check, plan and fly a mission file (YAML, see CONTRACTS.md).",
+    )
+    commands = mission.add_subparsers(dest="mission_command", metavar="COMMAND", required=True)
+
+    check = commands.add_parser(
+        "check",
+        help="validate and plan a mission, write nothing, print a summary",
+        description="Validate and plan a mission; exit 0 ok, 1 no valid path, 2 bad input.",
+    )
+    add_planning_arguments(check)
+    check.add_argument("--json", action="store_true", help="print the plan JSON on stdout")
+    check.set_defaults(handler=check_command)
+
+    plan = commands.add_parser(
+        "plan",
+        help="plan a mission: path, fleet size, duration, safe speed",
+        description="Plan a mission; exit 0 ok, 1 no valid path, 2 bad input.",
+    )
+    add_planning_arguments(plan)
+    plan.add_argument(
+        "--json", action="store_true", help="print the plan JSON on stdout (text goes to stderr)"
+    )
+    plan.add_argument("--out", type=Path, metavar="PLAN.json", help="write the plan JSON here")
+    plan.add_argument(
+        "--plot", type=Path, metavar="PLAN.png", help="draw the map and the formation (png/pdf/svg)"
+    )
+    plan.set_defaults(handler=plan_command)
+
+    for name in SUBCOMMANDS:
+        importlib.import_module(name).register(commands)
+
+
+def add_planning_arguments(parser: argparse.ArgumentParser) -> None:
+    """FILE and the options every planning command shares (reused by `mission run`)."""
+    parser.add_argument("file", type=Path, metavar="FILE", help="mission file (YAML)")
+    parser.add_argument(
+        "--cap-speed",
+        action="store_true",
+        help="cap speeds to the safe formation speed instead of refusing (speed.cap_to_safe)",
+    )
+    parser.add_argument(
+        "--method",
+        choices=("exact", "penalty"),
+        default="exact",
+        help="path search: exact directed-edge Dijkstra (default) or the paper's penalty loop",
+    )
+    parser.add_argument(
+        "--connect",
+        nargs="+",
+        metavar="URL",
+        help="MAVLink connection strings, one per UAV (overrides fleet.connections)",
+    )
+
+
+def plan_from_args(args: argparse.Namespace) -> MissionPlan:
+    """Load and plan `args.file` with the shared planning options."""
+    mission = load_mission(args.file)
+    return plan_mission(
+        mission,
+        cap_speed=args.cap_speed,
+        connections=tuple(args.connect) if args.connect else None,
+        method=args.method,
+    )
+
+
+def check_command(args: argparse.Namespace) -> int:
+    plan = plan_from_args(args)
+    console = Console(stderr=args.json, highlight=False)
+    if args.json:
+        print(json.dumps(plan_json(plan), allow_nan=False))
+    print_summary(console, plan)
+    return EXIT_OK if plan.valid else EXIT_NO_PATH
+
+
+def plan_command(args: argparse.Namespace) -> int:
+    out = output_path(args.out, "--out", (".json",)) if args.out else None
+    plot = output_path(args.plot, "--plot", PLOT_SUFFIXES) if args.plot else None
+    plan = plan_from_args(args)
+    data = plan_json(plan)
+    text = json.dumps(data, allow_nan=False)
+    written = []
+    if out is not None:
+        _write(out, "--out", lambda: out.write_text(json.dumps(data, indent=2) + "\n"))
+        written.append(out)
+    if plot is not None:
+        from gcs.plot import save_plan_figure  # matplotlib only when asked
+
+        _write(plot, "--plot", lambda: save_plan_figure(plan, plot))
+        written.append(plot)
+    console = Console(stderr=args.json, highlight=False)
+    if args.json:
+        print(text)
+    print_summary(console, plan, written)
+    return EXIT_OK if plan.valid else EXIT_NO_PATH
+
+
+def output_path(path: Path, flag: str, suffixes: tuple[str, ...]) -> Path:
+    """Refuse, before planning, an output path that cannot be written."""
+    if path.suffix.lower() not in suffixes:
+        raise InputError(None, flag, f"a file name ending in {' or '.join(suffixes)}, got {path}")
+    if path.is_dir():
+        raise InputError(None, flag, f"a file path, got the directory {path}")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(None, flag, f"a file in an existing directory, got {path}")
+    return path
+
+
+def _write(path: Path, flag: str, write: Any) -> None:
+    try:
+        write()
+    except OSError as exc:
+        raise InputError(None, flag, f"a writable file, got {path} ({exc.strerror})") from None
+
+
+def print_summary(console: Console, plan: MissionPlan, written: list[Path] | None = None) -> None:
+    """The human summary: path, length, fleet size, duration, safe speed, planning time."""
+    mission = plan.mission
+    pp = plan.path_plan
+    if not plan.valid:
+        console.print(f"{mission.source}: no valid path: {plan.reason}", soft_wrap=True)
+        console.print(
+            f"planning: {pp.node_count} nodes, {pp.edges_examined} edges examined, "
+            f"{pp.iterations} iterations, {plan.planning_time_s * 1000:.1f} ms",
+            soft_wrap=True,
+        )
+        for path in written or ():
+            console.print(f"wrote {path}", soft_wrap=True)
+        return
+    table = Table(title=f"mission {mission.name} ({mission.source})", show_header=False)
+    table.add_column("", style="bold")
+    table.add_column("")
+    table.add_row("path", _path_text(pp.path))
+    table.add_row("length", f"{pp.length_m:.1f} m ({len(pp.path)} points)")
+    table.add_row("fleet size", f"{pp.fleet_size} UAVs (minimum {pp.min_fleet_size}, eq. 28)")
+    table.add_row("duration", f"{plan.duration_s:.1f} s")
+    capped = " (capped)" if plan.speed_capped else ""
+    table.add_row(
+        "speed",
+        f"max {plan.speeds.max:.3g} m/s{capped}, safe {plan.safe_speed_mps:.3g} m/s "
+        f"(a_max {mission.vehicle.max_acceleration:g} m/s², budget {plan.error_budget_m:.3g} m)",
+    )
+    over = plan.smoothing_error_m > plan.error_budget_m
+    table.add_row(
+        "smoothing error",
+        f"{plan.smoothing_error_m:.3g} m over a {plan.smoothing_window_s:.3g} s window"
+        + (f" [bold red](above the {plan.error_budget_m:.3g} m budget)[/]" if over else ""),
+    )
+    table.add_row(
+        "planning",
+        f"{plan.planning_time_s * 1000:.1f} ms, {pp.node_count} nodes, "
+        f"{pp.edges_examined} edges examined, {pp.iterations} iterations",
+    )
+    for path in written or ():
+        table.add_row("wrote", str(path))
+    console.print(table)
+
+
+def _path_text(path: Any, keep: int = 4) -> str:
+    points = [f"({x:.1f}, {y:.1f})" for x, y in path]
+    if len(points) > 2 * keep + 1:
+        points = [*points[:keep], f"... {len(points) - 2 * keep} more ...", *points[-keep:]]
+    return " -> ".join(points)

@@ -1,0 +1,297 @@
+"""`gcs mission run FILE`: plan, connect (starting the simulated fleet), fly, land, summarise.
+
+Registered under `gcs mission` (through `gcs.cmd_mission.SUBCOMMANDS`). Exit statuses
+(CONTRACTS.md): 0 completed, 1 aborted or a safety bound broken (or no valid path), 2 bad
+input. With `--json` exactly one JSON object goes to stdout (the run JSON, also on exit 1) and
+human text to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import time
+from contextlib import ExitStack
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+
+from gcs.drivers import BackendUnavailable, driver_class
+from gcs.drivers.base import DriverTiming, ExternalFleet, UavSpec
+from gcs.drivers.sim import SimFleet, SimVehicleSetup
+from gcs.errors import InputError
+from gcs.link import Link
+from gcs.mission import load_mission
+from gcs.planning import plan_json, plan_mission
+from gcs.recording import FlightRecorder
+from gcs.runtime import MissionClock, MissionRun, RunOptions
+from gcs.speed import OperatorSocket, socket_path_for
+from gcs.summary import EXIT_ABORTED, exit_status, run_json, summary_renderable
+
+#: Highest setpoint rate the scheduler streams (mission time), Hz.
+MAX_SETPOINT_RATE_HZ = 50.0
+#: Highest --speedup accepted.
+MAX_SPEEDUP = 100.0
+
+
+def register(mission_commands: argparse._SubParsersAction) -> None:
+    """Add `gcs mission run`."""
+    from gcs.cmd_mission import add_planning_arguments
+
+    run = mission_commands.add_parser(
+        "run",
+        help="plan and fly a mission (starts the simulated fleet by default)",
+        description=(
+            "Plan and fly a mission: connect the fleet (backend sim starts its own vehicles), "
+            "take off, fly the line formation, land on the arrival slots, print the summary. "
+            "Exit 0 completed, 1 aborted or a safety bound broken, 2 bad input."
+        ),
+    )
+    add_planning_arguments(run)
+    run.add_argument(
+        "--speedup",
+        type=float,
+        default=1.0,
+        metavar="K",
+        help="fly K times faster than real time (vehicles and mission clock), default 1",
+    )
+    run.add_argument("--log", type=Path, metavar="PATH", help="MCAP file to write (exact path)")
+    run.add_argument("--force", action="store_true", help="overwrite an existing --log file")
+    run.add_argument(
+        "--json", action="store_true", help="print the run JSON on stdout (text goes to stderr)"
+    )
+    run.add_argument(
+        "--foxglove",
+        nargs="?",
+        const=8765,
+        type=int,
+        metavar="PORT",
+        help="also serve the recording live to Foxglove on 127.0.0.1:PORT (default 8765)",
+    )
+    run.add_argument(
+        "--insecure", action="store_true", help="do not sign MAVLink (signing is not built yet)"
+    )
+    run.add_argument(
+        "--link-wait",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="after a link loss, without an operator: mission seconds to wait for it to come "
+        "back before landing everyone (default 10)",
+    )
+    run.add_argument(
+        "--takeoff-lead",
+        type=float,
+        metavar="S",
+        help="mission seconds between a UAV's take-off and its departure (default: from the "
+        "climb to the cruise altitude)",
+    )
+    run.add_argument(
+        "--vehicles-per-process",
+        type=int,
+        default=1,
+        metavar="N",
+        help="sim backend: UAVs hosted by each `vehicles sim` process (default 1)",
+    )
+    run.add_argument("--no-live", action="store_true", help="no live view, even in a terminal")
+    run.set_defaults(handler=run_command)
+
+
+def default_log_path(name: str, now: datetime | None = None) -> Path:
+    """`./logs/<name>-<UTC yyyymmddThhmmssZ>.mcap` (CONTRACTS.md)."""
+    stamp = (now or datetime.now(UTC)).strftime("%Y%m%dT%H%M%SZ")
+    return Path("logs") / f"{name}-{stamp}.mcap"
+
+
+def resolve_log_path(args: argparse.Namespace, name: str) -> Path:
+    """The log file to write; bad input (exit 2) if it exists without --force."""
+    if args.log is None:
+        path = default_log_path(name)
+        path.parent.mkdir(parents=True, exist_ok=True)
+    else:
+        path = args.log
+        if path.suffix.lower() != ".mcap":
+            raise InputError(None, "--log", f"a file name ending in .mcap, got {path}")
+        parent = path.parent if str(path.parent) else Path(".")
+        if not parent.is_dir():
+            raise InputError(None, "--log", f"a file in an existing directory, got {path}")
+    if path.is_dir():
+        raise InputError(None, "--log", f"a file path, got the directory {path}")
+    if path.exists() and not args.force:
+        raise InputError(None, "--log", f"a new file ({path} exists; add --force to overwrite)")
+    return path
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """Refuse bad flag values before anything starts (exit 2)."""
+    if not (math.isfinite(args.speedup) and 0 < args.speedup <= MAX_SPEEDUP):
+        raise InputError(
+            None, "--speedup", f"a number in (0, {MAX_SPEEDUP:g}], got {args.speedup:g}"
+        )
+    if not (math.isfinite(args.link_wait) and args.link_wait >= 0):
+        raise InputError(None, "--link-wait", f"a number of seconds >= 0, got {args.link_wait:g}")
+    if args.takeoff_lead is not None and not (
+        math.isfinite(args.takeoff_lead) and args.takeoff_lead > 0
+    ):
+        raise InputError(
+            None, "--takeoff-lead", f"a number of seconds > 0, got {args.takeoff_lead:g}"
+        )
+    if args.vehicles_per_process < 1:
+        raise InputError(None, "--vehicles-per-process", "an integer >= 1")
+    if args.foxglove is not None and not 0 < args.foxglove < 65536:
+        raise InputError(None, "--foxglove", f"a TCP port in 1..65535, got {args.foxglove}")
+
+
+def run_command(args: argparse.Namespace) -> int:
+    check_arguments(args)
+    mission = load_mission(args.file)
+    rate = mission.sim.setpoint_rate_hz
+    if rate > MAX_SETPOINT_RATE_HZ:
+        raise InputError(
+            mission.source,
+            "sim.setpoint_rate_hz",
+            f"at most {MAX_SETPOINT_RATE_HZ:g} Hz, got {rate:g}",
+        )
+    log_path = resolve_log_path(args, mission.name)  # refused before planning, if it is
+    try:
+        family = driver_class(mission.fleet.backend)
+    except BackendUnavailable as error:
+        raise InputError(
+            mission.source, "fleet.backend", f"a backend this GCS can fly ({error})"
+        ) from None
+    plan = plan_mission(
+        mission,
+        cap_speed=args.cap_speed,
+        connections=tuple(args.connect) if args.connect else None,
+        method=args.method,
+    )
+    console = Console(stderr=True, highlight=False) if args.json else Console(highlight=False)
+    if not plan.valid:
+        if args.json:
+            print(
+                json.dumps(
+                    {"completed": False, "fleet_size": 0, "reason": f"no valid path: {plan.reason}"}
+                )
+            )
+        console.print(f"{mission.source}: no valid path: {plan.reason}")
+        return EXIT_ABORTED
+    if args.insecure:
+        Console(stderr=True).print("[bold yellow]--insecure: MAVLink is not signed[/]")
+
+    options = RunOptions(
+        speedup=args.speedup,
+        setpoint_rate_hz=rate,
+        link_wait_s=args.link_wait,
+        takeoff_lead_s=args.takeoff_lead,
+    )
+    clock = MissionClock(args.speedup)
+    formation = plan.formation
+    stderr_tty = sys.stderr.isatty()
+    with ExitStack() as stack:
+        recorder = FlightRecorder(log_path, clock, force=args.force, serve_port=args.foxglove)
+        stack.callback(recorder.close)
+        plan_data = plan_json(plan)
+        recorder.attach("mission.yaml", "application/yaml", mission.text.encode())
+        recorder.attach("plan.json", "application/json", json.dumps(plan_data).encode())
+        recorder.metadata("mission", {"name": mission.name, "source": str(mission.source)})
+        recorder.plan(plan_data, time.monotonic())
+
+        if mission.fleet.backend == "sim" and not (args.connect or mission.fleet.connections):
+            leaders: dict[int, list[tuple[float, float]]] = {}
+            for change in mission.speed.changes:
+                if change.leader is not None:
+                    leaders.setdefault(change.leader, []).append((change.at, change.speed))
+            fleet = SimFleet(sim_setup(mission, formation, args, leaders, log_path))
+        else:
+            fleet = ExternalFleet(list(args.connect or mission.fleet.connections))
+        stack.callback(fleet.close)
+        urls = fleet.start()
+
+        operator = OperatorSocket(socket_path_for(log_path))
+        stack.callback(operator.close)
+        timing = DriverTiming(speedup=args.speedup)
+        drivers = []
+        for index, url in enumerate(urls):
+            uav = index + 1
+            link = Link(url, uav, capture=_capture(recorder, uav))
+            stack.callback(link.close)
+            spec = UavSpec(
+                uav_id=uav,
+                system_id=uav,
+                url=url,
+                origin=mission.origin,
+                start_slot=formation.start_slots[index],
+                goal_slot=formation.goal_slots[index],
+                altitude=mission.altitude,
+            )
+            drivers.append(family(spec, link, timing))
+        view = None
+        if stderr_tty and not args.json and not args.no_live:
+            from gcs.liveview import LiveView
+
+            view = LiveView(Console(stderr=True))
+            stack.callback(view.close)
+            options = RunOptions(**{**options.__dict__, "interactive": view.interactive})
+        run = MissionRun(
+            plan, drivers, clock, recorder, options, fleet=fleet, operator=operator, view=view
+        )
+        previous = signal.getsignal(signal.SIGINT)
+
+        def on_sigint(signum, frame):
+            run.interrupt()
+            if run.interrupts >= 3:
+                signal.signal(signal.SIGINT, previous)
+                raise KeyboardInterrupt
+
+        def on_sigterm(signum, frame):
+            raise SystemExit(128 + signum)  # leave through the ExitStack: vehicles stopped
+
+        previous_term = signal.signal(signal.SIGTERM, on_sigterm)
+        stack.callback(signal.signal, signal.SIGTERM, previous_term)
+        signal.signal(signal.SIGINT, on_sigint)
+        stack.callback(signal.signal, signal.SIGINT, previous)
+        result = run.run()
+
+    data = run_json(result, str(log_path), mission.safety_margin)
+    if args.json:
+        print(json.dumps(data, allow_nan=False))
+    console.print(summary_renderable(result, str(log_path), mission.safety_margin))
+    return exit_status(result)
+
+
+def sim_setup(mission, formation, args, leaders, log_path: Path) -> SimVehicleSetup:
+    """The simulated fleet of `mission`: homes on the parking slots at A, the mission's
+    vehicle limits, wind and navigation noise, leaders and speedup."""
+    noise = mission.sim.noise
+    direction = math.radians(noise.wind_direction_deg)
+    return SimVehicleSetup(
+        homes=np.asarray(formation.start_slots),
+        origin=mission.origin,
+        speedup=args.speedup,
+        seed=mission.sim.seed,
+        per_process=args.vehicles_per_process,
+        max_speed=mission.vehicle.max_speed,
+        max_acceleration=mission.vehicle.max_acceleration,
+        wind_mps=(
+            noise.wind_mean_mps * math.cos(direction),
+            noise.wind_mean_mps * math.sin(direction),
+        ),
+        gust_mps=noise.wind_gust_mps,
+        navigation_noise_m=noise.position_m,
+        leaders=leaders,
+        log_dir=log_path.parent / (log_path.stem + "-vehicles")
+        if getattr(args, "verbose", 0)
+        else None,
+    )
+
+
+def _capture(recorder: FlightRecorder, uav: int):
+    def capture(direction: str, raw: bytes, message, wall: float) -> None:
+        recorder.mavlink(uav, direction, raw, message, wall)
+
+    return capture

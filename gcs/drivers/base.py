@@ -1,0 +1,977 @@
+"""The driver interface: one UAV's autopilot conversation, one subclass per autopilot family.
+
+Modelled on skybrush's `autopilots/base.py`: the runtime talks to every UAV through `Driver`
+and asks *capabilities* (`accepts_acceleration_feedforward`,
+`needs_setpoint_stream_before_offboard`, ...) instead of testing "is this PX4?". The family is
+chosen once, from `fleet.backend`, in `gcs/drivers/__init__.py` (never from the heartbeat).
+
+Non-blocking state machine. The runtime runs ONE scheduler loop for the whole fleet; it calls
+
+* `on_message(msg, now)` for every valid message its `Link` received from this UAV,
+* `step(now)` once per tick: advances the handshake, retransmits pending commands until their
+  `COMMAND_ACK`, times out, sends the GCS heartbeat,
+* the requests `takeoff(altitude)`, `land()`, `hold()`, `resume()`, `send_setpoint(...)` and
+  `send_speed_change(change)`, which only send or queue and return at once.
+
+Nothing here sleeps, waits on a socket or starts a thread. `now` is always the wall clock
+(`time.monotonic()` seconds); every delay a driver uses goes through `DriverTiming.wall`, which
+divides a vehicle-time delay by the speedup and never goes below a wall-clock floor.
+
+Phases (`Phase`): connecting -> initialising (waiting for a usable position/home) -> ready ->
+arming (guided/offboard mode, then arm) -> taking_off -> following (airborne, streaming) <->
+holding -> landing -> landed; failed (with `failure_reason`) from anywhere. `takeoff()` may be
+called early: it is carried out as soon as the UAV is ready.
+
+What a family subclass MUST implement
+-------------------------------------
+* `family` (class attribute): the `fleet.backend` name (`"sim"`, `"ardupilot"`, `"px4"`).
+* `mode_command(mode: FlightMode) -> CommandSpec`: the command that selects a logical mode
+  (GUIDED/OFFBOARD, HOLD, LAND) on this autopilot.
+* `current_mode() -> FlightMode | None`: the logical mode from the last heartbeat.
+* `takeoff_command(relative_altitude) -> CommandSpec | None`: `None` means the family takes
+  off by following the setpoint stream (PX4 OFFBOARD).
+
+It MAY override:
+* capability properties below (defaults are a plain, well-behaved autopilot);
+* `on_connected(now)`: after the first heartbeat (e.g. `MAV_CMD_SET_MESSAGE_INTERVAL`);
+* `position_ready() -> bool`: usable position estimate for arming (default: a position and a
+  home are known; ArduPilot adds the EKF / pre-arm bit);
+* `on_family_message(msg, now)`: messages the base does not handle (EKF_STATUS_REPORT, EVENT);
+* `command_ack_is_final(pending, ack) -> bool`: PX4's double acknowledgement of DO_SET_MODE;
+* `landing_command()`: default `mode_command(FlightMode.LAND)`.
+
+The shared helpers every family needs live here: `send_command` (COMMAND_LONG or COMMAND_INT,
+retransmitted until a final COMMAND_ACK, refusals reported with the STATUSTEXT that explains
+them), STATUSTEXT capture with chunk reassembly, telemetry in the mission's local ENU frame
+(through `gcs.geodesy`), the GCS heartbeat, setpoint encoding, and leader speed requests.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+from abc import ABC, abstractmethod
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import ClassVar
+
+import numpy as np
+
+from gcs.geodesy import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs.link import Link, mavutil
+from gcs.speed import SpeedChange
+
+log = logging.getLogger(__name__)
+
+mavlink = mavutil.mavlink
+
+#: type_mask bits of SET_POSITION_TARGET_* (MAVLink POSITION_TARGET_TYPEMASK).
+IGNORE_ACCELERATION = 64 | 128 | 256
+IGNORE_YAW = 1024 | 2048
+#: Position + velocity (CONTRACTS.md: accepted by both real autopilots).
+MASK_POSITION_VELOCITY = IGNORE_ACCELERATION | IGNORE_YAW  # 3520
+#: Position + velocity + acceleration feed-forward.
+MASK_POSITION_VELOCITY_ACCELERATION = IGNORE_YAW  # 3072
+
+#: SYS_STATUS health bit the autopilots set when pre-arm checks pass.
+PREARM_CHECK_BIT = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+
+
+class Phase(enum.Enum):
+    """Where one UAV is in its mission (what the live view and the run JSON show)."""
+
+    CONNECTING = "connecting"  # no heartbeat yet
+    INITIALISING = "initialising"  # heartbeat seen; waiting for position / EKF / home
+    READY = "ready"  # can arm
+    ARMING = "arming"  # selecting guided/offboard mode, arming
+    TAKING_OFF = "taking_off"  # climbing above its parking slot
+    FOLLOWING = "following"  # airborne, following the setpoint stream
+    HOLDING = "holding"  # airborne, holding position in the autopilot's hold mode
+    LANDING = "landing"
+    LANDED = "landed"  # on the ground (after a flight, or never took off after land())
+    FAILED = "failed"  # see Driver.failure_reason
+
+
+#: Phases in which the vehicle is (or may be) in the air.
+AIRBORNE_PHASES = frozenset({Phase.TAKING_OFF, Phase.FOLLOWING, Phase.HOLDING, Phase.LANDING})
+
+
+class FlightMode(enum.Enum):
+    """Logical flight modes; each family maps them to its own mode numbers."""
+
+    GUIDED = "guided"  # ArduPilot GUIDED, PX4 OFFBOARD: follows the GCS's setpoints
+    HOLD = "hold"  # hold position (BRAKE/LOITER, PX4 AUTO.LOITER)
+    LAND = "land"
+
+
+@dataclass(frozen=True)
+class DriverTiming:
+    """Delays of the vehicles' clock turned into wall-clock delays (`--speedup K`).
+
+    A delay `s` in vehicle time lasts `s / speedup` wall seconds, but never less than
+    `wall_floor_s`, so that a busy machine does not trip timeouts at high speedup.
+    """
+
+    speedup: float = 1.0
+    wall_floor_s: float = 0.25
+
+    def wall(self, seconds: float, floor: float | None = None) -> float:
+        """Wall-clock seconds for `seconds` of vehicle time, at least the floor."""
+        return max(seconds / self.speedup, self.wall_floor_s if floor is None else floor)
+
+
+@dataclass(frozen=True, eq=False)
+class UavSpec:
+    """What a driver is told about its UAV.
+
+    `uav_id` is 1..N in formation order; `start_slot` / `goal_slot` are the parking slots
+    (local x, y in metres) where its home must be and where it lands; `altitude` is the cruise
+    altitude above the origin (CONTRACTS.md).
+    """
+
+    uav_id: int
+    system_id: int
+    url: str
+    origin: Origin
+    start_slot: np.ndarray
+    goal_slot: np.ndarray
+    altitude: float
+
+
+@dataclass(frozen=True)
+class CommandSpec:
+    """A MAVLink command to send as COMMAND_LONG (default) or COMMAND_INT.
+
+    For COMMAND_INT, params 5-7 are `x`, `y` (integers) and `z`.
+    """
+
+    command: int
+    params: tuple[float, ...] = (0, 0, 0, 0, 0, 0, 0)
+    use_int: bool = False
+    frame: int = mavlink.MAV_FRAME_GLOBAL
+    label: str = ""
+    retry_s: float = 1.0  # vehicle-time seconds between retransmissions
+    max_attempts: int | None = 5  # None: until acknowledged or cancelled
+    acks_needed: int = 1  # PX4 answers DO_SET_MODE twice
+    key: object = None  # identifies the command among pending ones (default: command id)
+
+    @property
+    def name(self) -> str:
+        if self.label:
+            return self.label
+        entry = mavlink.enums["MAV_CMD"].get(self.command)
+        return entry.name if entry else str(self.command)
+
+
+#: Result of a command: the final MAV_RESULT, or None when every attempt went unanswered.
+CommandCallback = Callable[[int | None, float], None]
+
+
+@dataclass
+class PendingCommand:
+    """A command waiting for its final COMMAND_ACK."""
+
+    spec: CommandSpec
+    on_result: CommandCallback | None
+    first_sent: float
+    last_sent: float
+    attempts: int = 1
+    acks: int = 0  # ACCEPTED acks received so far
+    in_progress: bool = False
+
+
+@dataclass(frozen=True)
+class DriverEvent:
+    """Something worth logging: a phase change, a STATUSTEXT, a refusal, a timeout."""
+
+    time: float  # wall clock
+    uav_id: int
+    kind: str  # "phase" | "statustext" | "command" | "failed" | "leader_request" | ...
+    text: str
+    severity: int = mavlink.MAV_SEVERITY_INFO
+
+
+@dataclass(frozen=True)
+class LeaderRequest:
+    """A speed change asked for by a UAV acting as leader (CONTRACTS.md: x = 0, y = its seq)."""
+
+    uav_id: int
+    seq: int | None
+    speed: float
+    received: float  # wall clock
+
+
+@dataclass
+class Telemetry:
+    """The latest state reported by one UAV, positions in the mission's local ENU frame."""
+
+    position_enu: np.ndarray | None = None  # (3,) from GLOBAL_POSITION_INT
+    velocity_enu: np.ndarray | None = None  # (3,)
+    relative_altitude: float | None = None  # m above home
+    position_time: float | None = None  # wall clock of the last position
+    home_enu: np.ndarray | None = None  # (3,) from HOME_POSITION
+    armed: bool = False
+    base_mode: int = 0
+    custom_mode: int | None = None
+    system_status: int = 0
+    landed_state: int = mavlink.MAV_LANDED_STATE_UNDEFINED
+    prearm_ok: bool | None = None
+    heartbeat_time: float | None = None
+    autopilot: int | None = None
+    vehicle_type: int | None = None
+    # Simulators only (SIM_STATE: the true, noise-free state), for the run's metrics
+    true_position_enu: np.ndarray | None = None
+    true_velocity_enu: np.ndarray | None = None
+    true_time: float | None = None
+    # The vehicle's own clock (time_boot_ms of its last message that has one), seconds; a
+    # sample's time on it does not suffer from the ground station's receive delays.
+    vehicle_time_s: float | None = None
+    position_vehicle_time_s: float | None = None
+    true_vehicle_time_s: float | None = None
+    navigation_noise_m: float | None = None  # the simulator's navigation noise (1 sigma)
+
+
+class Driver(ABC):
+    """One UAV behind one `Link`; see the module docstring for what a family implements."""
+
+    family: ClassVar[str] = ""
+
+    #: Seconds (vehicle time) the UAV may take to send its first heartbeat; wall floor below.
+    connect_timeout_s: ClassVar[float] = 30.0
+    connect_wall_floor_s: ClassVar[float] = 15.0
+    #: Seconds (vehicle time) from the first heartbeat to a usable position (ArduPilot: ~40 s).
+    initialise_timeout_s: ClassVar[float] = 60.0
+    #: Seconds (vehicle time) allowed for guided mode + arming, and for the climb.
+    arming_timeout_s: ClassVar[float] = 20.0
+    takeoff_timeout_s: ClassVar[float] = 60.0
+    #: The climb is over when the UAV is this close (m) to the take-off altitude.
+    takeoff_altitude_tolerance_m: ClassVar[float] = 1.0
+    #: Period (vehicle time) of the GCS heartbeat sent to the UAV.
+    heartbeat_period_s: ClassVar[float] = 1.0
+
+    def __init__(self, spec: UavSpec, link: Link, timing: DriverTiming | None = None) -> None:
+        self.spec = spec
+        self.link = link
+        self.timing = timing or DriverTiming()
+        self.telemetry = Telemetry()
+        self.phase = Phase.CONNECTING
+        self.failure_reason: str | None = None
+        self.phase_since: float | None = None
+        self.statustexts: list[tuple[float, int, str]] = []
+        self.speed_acks: dict[int, float] = {}  # seq -> wall time of its COMMAND_ACK
+        self.speed_results: dict[int, int | None] = {}  # seq -> MAV_RESULT (None: unanswered)
+        self.setpoints_sent = 0
+        self._events: deque[DriverEvent] = deque()
+        self._leader_requests: deque[LeaderRequest] = deque()
+        self._leader_seqs: set[int] = set()
+        self._pending: dict[object, PendingCommand] = {}
+        self._chunks: dict[int, list[str]] = {}
+        self._takeoff_altitude: float | None = None
+        self._last_heartbeat_sent: float | None = None
+        self._started: float | None = None
+        self._mode_requested: FlightMode | None = None
+        self._arm_requested = False
+        self._takeoff_sent = False
+        self._first_setpoint_time: float | None = None
+        #: Mission time at a wall time, once the runtime anchored its clock (None before).
+        self.mission_clock: Callable[[float], float | None] = lambda now: None
+
+    # ------------------------------------------------------------------ family hooks
+    @abstractmethod
+    def mode_command(self, mode: FlightMode) -> CommandSpec:
+        """The command that selects `mode` on this autopilot."""
+
+    @abstractmethod
+    def current_mode(self) -> FlightMode | None:
+        """The logical mode of the last heartbeat (None: another mode, or none seen)."""
+
+    @abstractmethod
+    def takeoff_command(self, relative_altitude: float) -> CommandSpec | None:
+        """The take-off command to `relative_altitude` m above home (None: by setpoints)."""
+
+    def landing_command(self) -> CommandSpec:
+        """The command that lands where the UAV is."""
+        return self.mode_command(FlightMode.LAND)
+
+    def on_connected(self, now: float) -> None:
+        """Called once, after the first heartbeat (request streams, versions...)."""
+        return None
+
+    def position_ready(self) -> bool:
+        """True when the autopilot's position estimate allows arming."""
+        return self.telemetry.position_enu is not None and self.telemetry.home_enu is not None
+
+    def on_family_message(self, msg, now: float) -> None:
+        """Messages the base class does not interpret."""
+        return None
+
+    def on_heartbeat_sent(self, now: float) -> None:
+        """Called after each GCS heartbeat (periodic family traffic, e.g. the sim's clock)."""
+        return None
+
+    def command_ack_is_final(self, pending: PendingCommand, ack) -> bool:
+        """Whether `ack` ends `pending` (PX4 sends two acks for DO_SET_MODE)."""
+        if ack.result == mavlink.MAV_RESULT_ACCEPTED:
+            return pending.acks >= pending.spec.acks_needed
+        return ack.result != mavlink.MAV_RESULT_IN_PROGRESS
+
+    # ------------------------------------------------------------------ capabilities
+    @property
+    def accepts_acceleration_feedforward(self) -> bool:
+        """Whether setpoints may carry acceleration (otherwise mask 3520: position+velocity)."""
+        return False
+
+    @property
+    def needs_setpoint_stream_before_offboard(self) -> bool:
+        """Whether setpoints must already flow before the guided/offboard mode is selected."""
+        return False
+
+    @property
+    def acks_set_mode(self) -> bool:
+        """Whether a mode change is acknowledged (MAV_CMD_DO_SET_MODE) rather than only
+        visible in the next heartbeat."""
+        return True
+
+    @property
+    def setpoints_time_out_on_vehicle(self) -> bool:
+        """Whether the vehicle itself holds when setpoints stop (ArduPilot GUIDED does not)."""
+        return True
+
+    @property
+    def honours_speed_change_time(self) -> bool:
+        """Whether DO_CHANGE_SPEED's `x` (effective time) and `y` (seq) are used by the vehicle;
+        real autopilots ack at once and ignore them."""
+        return False
+
+    @property
+    def home_tolerance_m(self) -> float:
+        """How far (horizontally) the vehicle's home may be from its parking slot."""
+        return 1.0
+
+    # ------------------------------------------------------------------ runtime interface
+    @property
+    def uav_id(self) -> int:
+        return self.spec.uav_id
+
+    @property
+    def wants_setpoints(self) -> bool:
+        """Whether the scheduler should stream setpoints to this UAV now."""
+        if self.phase == Phase.FOLLOWING:
+            return True
+        if self.phase in (Phase.ARMING, Phase.TAKING_OFF):
+            return self.needs_setpoint_stream_before_offboard or not self._takes_off_by_command
+        return False
+
+    @property
+    def airborne(self) -> bool:
+        return self.phase in AIRBORNE_PHASES
+
+    def on_message(self, msg, now: float) -> None:
+        """Take one valid message from this UAV into account."""
+        kind = msg.get_type()
+        boot_ms = getattr(msg, "time_boot_ms", None)
+        if boot_ms is not None:
+            self.telemetry.vehicle_time_s = boot_ms / 1000.0
+        handler = _HANDLERS.get(kind)
+        if handler is not None:
+            handler(self, msg, now)
+        else:
+            self.on_family_message(msg, now)
+
+    def step(self, now: float) -> None:
+        """Advance the state machine: heartbeat, retransmissions, timeouts, next command."""
+        if self._started is None:
+            self._started = now
+            self.phase_since = now
+        if self._last_heartbeat_sent is None or now - self._last_heartbeat_sent >= self.timing.wall(
+            self.heartbeat_period_s, floor=0.02
+        ):
+            self._send_heartbeat(now)
+        self._retransmit(now)
+        advance = _PHASE_STEPS.get(self.phase)
+        if advance is not None:
+            advance(self, now)
+
+    def takeoff(self, altitude: float, now: float) -> None:
+        """Arm and climb above the parking slot to `altitude` (m above the mission origin).
+
+        Safe to call before the UAV is ready: it starts as soon as it is.
+        """
+        self._takeoff_altitude = altitude
+        if self.phase == Phase.READY:
+            self._begin_arming(now)
+
+    def land(self, now: float) -> None:
+        """Land where the UAV is (the runtime brings it over its arrival slot first)."""
+        if self.phase in (Phase.LANDING, Phase.LANDED, Phase.FAILED):
+            return
+        self._takeoff_altitude = None
+        if not self.telemetry.armed and self.phase not in AIRBORNE_PHASES:
+            self._set_phase(Phase.LANDED, now, "never took off")
+            return
+        self._cancel_pending(lambda spec: spec.command != mavlink.MAV_CMD_DO_CHANGE_SPEED)
+        self.send_command(self.landing_command(), now, self._on_land_result)
+        self._set_phase(Phase.LANDING, now)
+
+    def hold(self, now: float) -> None:
+        """Hold position in the autopilot's own hold mode (the stream stops)."""
+        if self.phase in (Phase.FOLLOWING, Phase.TAKING_OFF):
+            self._request_mode(FlightMode.HOLD, now)
+            self._set_phase(Phase.HOLDING, now)
+
+    def resume(self, now: float) -> None:
+        """Back from hold to following the setpoint stream."""
+        if self.phase == Phase.HOLDING:
+            self._request_mode(FlightMode.GUIDED, now)
+            self._set_phase(Phase.FOLLOWING, now)
+
+    def send_setpoint(
+        self,
+        position_enu: np.ndarray,
+        velocity_enu: np.ndarray,
+        acceleration_enu: np.ndarray | None,
+        mission_time: float,
+        now: float,
+        geodetic: np.ndarray | None = None,
+    ) -> None:
+        """Send one SET_POSITION_TARGET_GLOBAL_INT (frame 6, altitude relative to home).
+
+        Positions are local ENU metres (z above the origin); `geodetic` (lat, lon, alt AMSL),
+        when the caller converted a whole fleet at once, saves the per-UAV conversion.
+        Velocities and accelerations are turned into NED as MAVLink wants them.
+        """
+        if geodetic is None:
+            geodetic = enu_to_geodetic(*position_enu, self.spec.origin)
+        lat, lon, alt_amsl = geodetic
+        use_acc = acceleration_enu is not None and self.accepts_acceleration_feedforward
+        mask = MASK_POSITION_VELOCITY_ACCELERATION if use_acc else MASK_POSITION_VELOCITY
+        acc = acceleration_enu if use_acc else (0.0, 0.0, 0.0)
+        msg = self.link.mav.set_position_target_global_int_encode(
+            self._boot_ms(now),
+            self.spec.system_id,
+            1,
+            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+            mask,
+            int(round(lat * 1e7)),
+            int(round(lon * 1e7)),
+            float(alt_amsl - self.home_altitude_amsl),
+            float(velocity_enu[1]),
+            float(velocity_enu[0]),
+            float(-velocity_enu[2]),
+            float(acc[1]),
+            float(acc[0]),
+            float(-acc[2]),
+            0.0,
+            0.0,
+        )
+        self.link.send(msg, now)
+        self.setpoints_sent += 1
+        if self._first_setpoint_time is None:
+            self._first_setpoint_time = now
+
+    def send_speed_change(self, change: SpeedChange, now: float) -> None:
+        """Broadcast leg for this UAV: COMMAND_INT DO_CHANGE_SPEED (CONTRACTS.md, MAVLink),
+        retransmitted until its COMMAND_ACK; the ack time lands in `speed_acks[seq]`."""
+        spec = CommandSpec(
+            mavlink.MAV_CMD_DO_CHANGE_SPEED,
+            (
+                1.0,
+                float(change.speed),
+                -1.0,
+                0.0,
+                int(round(change.effective_s * 1000)),
+                change.seq,
+                0.0,
+            ),
+            use_int=True,
+            frame=mavlink.MAV_FRAME_MISSION,
+            label=f"speed change {change.seq}",
+            retry_s=0.2,
+            max_attempts=None,
+            key=("speed", change.seq),
+        )
+
+        def done(result: int | None, when: float, seq: int = change.seq) -> None:
+            self.speed_results[seq] = result
+            if result is not None:
+                self.speed_acks.setdefault(seq, when)
+
+        self.send_command(spec, now, done)
+
+    def set_mission_clock(self, clock: Callable[[float], float | None]) -> None:
+        """The runtime anchored its mission clock: `clock(wall)` gives the mission time. The
+        next step sends a heartbeat (and whatever the family sends with it) at once."""
+        self.mission_clock = clock
+        self._last_heartbeat_sent = None
+
+    def drain_events(self) -> list[DriverEvent]:
+        """Events since the last call (phase changes, STATUSTEXT, refusals)."""
+        events = list(self._events)
+        self._events.clear()
+        return events
+
+    def drain_leader_requests(self) -> list[LeaderRequest]:
+        """Speed changes this UAV asked for as leader since the last call."""
+        requests = list(self._leader_requests)
+        self._leader_requests.clear()
+        return requests
+
+    def close(self) -> None:
+        """Forget pending commands (the link is closed by its owner)."""
+        self._pending.clear()
+
+    @property
+    def home_altitude_amsl(self) -> float:
+        """Home altitude (m AMSL): relative altitudes are measured from it."""
+        home = self.telemetry.home_enu
+        return self.spec.origin.alt + (0.0 if home is None else float(home[2]))
+
+    @property
+    def pending_commands(self) -> list[PendingCommand]:
+        return list(self._pending.values())
+
+    # ------------------------------------------------------------------ shared helpers
+    def send_command(
+        self, spec: CommandSpec, now: float, on_result: CommandCallback | None = None
+    ) -> None:
+        """Send `spec` now and retransmit it every `retry_s` until a final COMMAND_ACK.
+
+        A newer command with the same key replaces a pending one. `on_result(result, now)` gets
+        the final MAV_RESULT, or None after `max_attempts` unanswered sends.
+        """
+        key = spec.key if spec.key is not None else spec.command
+        self._pending[key] = PendingCommand(spec, on_result, now, now)
+        self._transmit(spec, now)
+
+    def emit(self, kind: str, text: str, now: float, severity: int = mavlink.MAV_SEVERITY_INFO):
+        """Queue an event for the runtime (and log it)."""
+        self._events.append(DriverEvent(now, self.uav_id, kind, text, severity))
+        log.log(
+            logging.WARNING if severity <= mavlink.MAV_SEVERITY_WARNING else logging.INFO,
+            "UAV %d: %s",
+            self.uav_id,
+            text,
+        )
+
+    def fail(self, reason: str, now: float) -> None:
+        """Give up on this UAV with a reason."""
+        self.failure_reason = reason
+        self._set_phase(Phase.FAILED, now, reason, severity=mavlink.MAV_SEVERITY_ERROR)
+
+    def last_statustext(self, since: float | None = None) -> str | None:
+        """The last STATUSTEXT received (after `since`, wall clock), if any."""
+        for when, _, text in reversed(self.statustexts):
+            if since is None or when >= since:
+                return text
+        return None
+
+    def _transmit(self, spec: CommandSpec, now: float) -> None:
+        target = (self.spec.system_id, 1)
+        p = spec.params
+        if spec.use_int:
+            msg = self.link.mav.command_int_encode(
+                *target,
+                spec.frame,
+                spec.command,
+                0,
+                0,
+                p[0],
+                p[1],
+                p[2],
+                p[3],
+                int(p[4]),
+                int(p[5]),
+                p[6],
+            )
+        else:
+            confirmation = 0
+            msg = self.link.mav.command_long_encode(*target, spec.command, confirmation, *p)
+        self.link.send(msg, now)
+
+    def _retransmit(self, now: float) -> None:
+        for key, pending in list(self._pending.items()):
+            if pending.in_progress or pending.acks > 0:
+                # acknowledged once (IN_PROGRESS, or the first of PX4's two acks): wait, then
+                # treat the silence as the end of the command
+                if now - pending.last_sent >= self.timing.wall(5 * pending.spec.retry_s):
+                    del self._pending[key]
+                    if pending.on_result is not None:
+                        result = mavlink.MAV_RESULT_ACCEPTED if pending.acks else None
+                        pending.on_result(result, now)
+                continue
+            if now - pending.last_sent < self.timing.wall(pending.spec.retry_s, floor=0.05):
+                continue
+            limit = pending.spec.max_attempts
+            if limit is not None and pending.attempts >= limit:
+                del self._pending[key]
+                self.emit(
+                    "command",
+                    f"{pending.spec.name}: no COMMAND_ACK after {pending.attempts} attempts",
+                    now,
+                    mavlink.MAV_SEVERITY_WARNING,
+                )
+                if pending.on_result is not None:
+                    pending.on_result(None, now)
+                continue
+            pending.attempts += 1
+            pending.last_sent = now
+            self._transmit(pending.spec, now)
+
+    def _cancel_pending(self, which: Callable[[CommandSpec], bool]) -> None:
+        for key in [k for k, p in self._pending.items() if which(p.spec)]:
+            del self._pending[key]
+
+    def _send_heartbeat(self, now: float) -> None:
+        self._last_heartbeat_sent = now
+        msg = self.link.mav.heartbeat_encode(
+            mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE
+        )
+        self.link.send(msg, now)
+        self.on_heartbeat_sent(now)
+
+    def _set_phase(
+        self, phase: Phase, now: float, why: str | None = None, severity=mavlink.MAV_SEVERITY_INFO
+    ) -> None:
+        if phase == self.phase:
+            return
+        previous = self.phase
+        self.phase = phase
+        self.phase_since = now
+        text = f"{previous.value} -> {phase.value}" + (f" ({why})" if why else "")
+        self.emit("phase", text, now, severity)
+
+    def _request_mode(self, mode: FlightMode, now: float) -> None:
+        self._mode_requested = mode
+        spec = replace(self.mode_command(mode), key="mode")
+        self.send_command(
+            spec, now, lambda result, when, m=mode: self._on_mode_result(m, result, when)
+        )
+
+    def _boot_ms(self, now: float) -> int:
+        """`time_boot_ms` of what we send: wall-clock ms since this driver started."""
+        return int(max(now - (self._started or now), 0.0) * 1000) & 0xFFFFFFFF
+
+    @property
+    def _takes_off_by_command(self) -> bool:
+        return self.takeoff_command(0.0) is not None
+
+    # ------------------------------------------------------------------ phase steps
+    def _step_connecting(self, now: float) -> None:
+        strangers = self.link.seen_system_ids - {self.spec.system_id}
+        if strangers and self.telemetry.heartbeat_time is None:
+            self.fail(
+                f"{self.link.url}: heard system id {min(strangers)}, expected {self.spec.system_id}",
+                now,
+            )
+            return
+        if now - self._started > self.timing.wall(
+            self.connect_timeout_s, floor=self.connect_wall_floor_s
+        ):
+            self.fail(f"no heartbeat from system {self.spec.system_id} on {self.link.url}", now)
+
+    def _step_initialising(self, now: float) -> None:
+        if self.telemetry.home_enu is None and "home" not in self._pending:
+            self.send_command(
+                CommandSpec(
+                    mavlink.MAV_CMD_REQUEST_MESSAGE,
+                    (mavlink.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0),
+                    label="request HOME_POSITION",
+                    retry_s=2.0,
+                    max_attempts=None,
+                    key="home",
+                ),
+                now,
+            )
+        if self.position_ready():
+            home = self.telemetry.home_enu
+            offset = float(np.hypot(*(home[:2] - self.spec.start_slot)))
+            if offset > self.home_tolerance_m:
+                self.fail(
+                    f"home is {offset:.1f} m from its parking slot "
+                    f"({self.spec.start_slot[0]:.1f}, {self.spec.start_slot[1]:.1f})",
+                    now,
+                )
+                return
+            self._pending.pop("home", None)
+            self._set_phase(Phase.READY, now)
+            if self._takeoff_altitude is not None:
+                self._begin_arming(now)
+            return
+        if now - self.phase_since > self.timing.wall(self.initialise_timeout_s):
+            self.fail("no usable position estimate", now)
+
+    def _begin_arming(self, now: float) -> None:
+        self._arm_requested = False
+        self._takeoff_sent = False
+        self._first_setpoint_time = None
+        self._set_phase(Phase.ARMING, now)
+        self._step_arming(now)
+
+    def _step_arming(self, now: float) -> None:
+        if now - self.phase_since > self.timing.wall(self.arming_timeout_s):
+            reason = self.last_statustext(since=self.phase_since)
+            self.fail("could not arm" + (f": {reason}" if reason else ""), now)
+            return
+        if self.current_mode() != FlightMode.GUIDED:
+            if self.needs_setpoint_stream_before_offboard and (
+                self._first_setpoint_time is None
+                or now - self._first_setpoint_time < self.timing.wall(0.5, floor=0.1)
+            ):
+                return  # the stream must be established first
+            if "mode" not in self._pending:
+                self._request_mode(FlightMode.GUIDED, now)
+            return
+        if not self.telemetry.armed:
+            if "arm" not in self._pending and not self._arm_requested:
+                self._arm_requested = True
+                self.send_command(
+                    CommandSpec(
+                        mavlink.MAV_CMD_COMPONENT_ARM_DISARM,
+                        (1, 0, 0, 0, 0, 0, 0),
+                        label="arm",
+                        key="arm",
+                    ),
+                    now,
+                    self._on_arm_result,
+                )
+            return
+        self._set_phase(Phase.TAKING_OFF, now)
+        self._step_taking_off(now)
+
+    def _step_taking_off(self, now: float) -> None:
+        target = self._takeoff_altitude
+        if target is None:
+            return
+        relative = target + self.spec.origin.alt - self.home_altitude_amsl
+        if not self._takeoff_sent:
+            self._takeoff_sent = True
+            command = self.takeoff_command(relative)
+            if command is not None:
+                self.send_command(replace(command, key="takeoff"), now, self._on_takeoff_result)
+        altitude = self.telemetry.relative_altitude
+        if altitude is not None and altitude >= relative - self.takeoff_altitude_tolerance_m:
+            self._set_phase(Phase.FOLLOWING, now, f"at {altitude:.1f} m")
+            return
+        if now - self.phase_since > self.timing.wall(self.takeoff_timeout_s):
+            self.fail(f"take-off did not reach {relative:.1f} m", now)
+
+    def _step_landing(self, now: float) -> None:
+        t = self.telemetry
+        if t.landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND or (
+            not t.armed and t.heartbeat_time is not None and t.heartbeat_time > self.phase_since
+        ):
+            self._set_phase(Phase.LANDED, now)
+
+    # ------------------------------------------------------------------ command results
+    def _on_mode_result(self, mode: FlightMode, result: int | None, now: float) -> None:
+        if result not in (mavlink.MAV_RESULT_ACCEPTED, None):
+            reason = self.last_statustext(since=now - self.timing.wall(2.0)) or _result_name(result)
+            self.emit(
+                "command", f"mode {mode.value} refused: {reason}", now, mavlink.MAV_SEVERITY_WARNING
+            )
+
+    def _on_arm_result(self, result: int | None, now: float) -> None:
+        if result == mavlink.MAV_RESULT_ACCEPTED:
+            return
+        reason = self.last_statustext(since=now - self.timing.wall(2.0)) or _result_name(result)
+        self.emit("command", f"arming refused: {reason}", now, mavlink.MAV_SEVERITY_WARNING)
+        self._arm_requested = False  # try again on a later step, until the arming timeout
+
+    def _on_takeoff_result(self, result: int | None, now: float) -> None:
+        if result != mavlink.MAV_RESULT_ACCEPTED and self.phase == Phase.TAKING_OFF:
+            reason = self.last_statustext(since=now - self.timing.wall(2.0)) or _result_name(result)
+            self.fail(f"take-off refused: {reason}", now)
+
+    def _on_land_result(self, result: int | None, now: float) -> None:
+        if result != mavlink.MAV_RESULT_ACCEPTED:
+            self.emit("command", f"land: {_result_name(result)}", now, mavlink.MAV_SEVERITY_ERROR)
+
+    # ------------------------------------------------------------------ message handlers
+    def _on_heartbeat(self, msg, now: float) -> None:
+        if msg.type == mavlink.MAV_TYPE_GCS or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
+            return  # another ground station or a companion, not the autopilot
+        t = self.telemetry
+        t.heartbeat_time = now
+        t.base_mode = msg.base_mode
+        t.custom_mode = msg.custom_mode
+        t.system_status = msg.system_status
+        t.autopilot = msg.autopilot
+        t.vehicle_type = msg.type
+        t.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        if self.phase == Phase.CONNECTING:
+            self._set_phase(Phase.INITIALISING, now)
+            self.on_connected(now)
+
+    def _on_global_position(self, msg, now: float) -> None:
+        if msg.lat == 0 and msg.lon == 0:
+            return  # ArduPilot streams zeros until it has a position
+        t = self.telemetry
+        t.position_enu = geodetic_to_enu(
+            msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, self.spec.origin
+        )
+        t.velocity_enu = np.array([msg.vy, msg.vx, -msg.vz], float) * 0.01
+        t.relative_altitude = msg.relative_alt * 1e-3
+        t.position_time = now
+        t.position_vehicle_time_s = t.vehicle_time_s
+
+    def _on_sim_state(self, msg, now: float) -> None:
+        """SIM_STATE (simulators): the true position, what the run's metrics measure."""
+        lat = msg.lat_int * 1e-7 if msg.lat_int else msg.lat
+        lon = msg.lon_int * 1e-7 if msg.lon_int else msg.lon
+        t = self.telemetry
+        t.true_position_enu = geodetic_to_enu(lat, lon, msg.alt, self.spec.origin)
+        t.true_velocity_enu = np.array([msg.ve, msg.vn, -msg.vd], float)
+        t.true_time = now
+        t.true_vehicle_time_s = t.vehicle_time_s  # SIM_STATE has no time: its tick's
+        t.navigation_noise_m = float(msg.std_dev_horz)
+
+    def _on_home_position(self, msg, now: float) -> None:
+        self.telemetry.home_enu = geodetic_to_enu(
+            msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3, self.spec.origin
+        )
+
+    def _on_extended_sys_state(self, msg, now: float) -> None:
+        self.telemetry.landed_state = msg.landed_state
+
+    def _on_sys_status(self, msg, now: float) -> None:
+        if msg.onboard_control_sensors_present & PREARM_CHECK_BIT:
+            self.telemetry.prearm_ok = bool(msg.onboard_control_sensors_health & PREARM_CHECK_BIT)
+
+    def _on_statustext(self, msg, now: float) -> None:
+        text = msg.text.rstrip("\x00")
+        chunk_id = getattr(msg, "id", 0)
+        if chunk_id:
+            parts = self._chunks.setdefault(chunk_id, [])
+            parts.append(text)
+            if len(msg.text) >= 50:  # a full chunk: more follow
+                return
+            text = "".join(self._chunks.pop(chunk_id))
+        text = text.strip()
+        self.statustexts.append((now, msg.severity, text))
+        self.emit("statustext", text, now, msg.severity)
+
+    def _on_command_ack(self, msg, now: float) -> None:
+        if msg.target_system not in (0, self.link.mav.srcSystem):
+            return
+        pending = self._match_ack(msg)
+        if pending is None:
+            return
+        key, command = pending
+        if msg.result == mavlink.MAV_RESULT_ACCEPTED:
+            command.acks += 1
+        if msg.result == mavlink.MAV_RESULT_IN_PROGRESS:
+            command.in_progress = True
+            command.last_sent = now
+        if self.command_ack_is_final(command, msg):
+            del self._pending[key]
+            if command.on_result is not None:
+                command.on_result(msg.result, now)
+        elif command.acks:
+            command.last_sent = now
+
+    def _match_ack(self, msg) -> tuple[object, PendingCommand] | None:
+        """The pending command an ack answers: same command id; for speed changes the one whose
+        seq the ack echoes in `result_param2`, else the oldest."""
+        candidates = [(k, p) for k, p in self._pending.items() if p.spec.command == msg.command]
+        if not candidates:
+            return None
+        if msg.command == mavlink.MAV_CMD_DO_CHANGE_SPEED:
+            echoed = getattr(msg, "result_param2", 0)
+            for key, pending in candidates:
+                if echoed and int(pending.spec.params[5]) == echoed:
+                    return key, pending
+        return min(candidates, key=lambda kp: kp[1].first_sent)
+
+    def _on_command(self, msg, now: float) -> None:
+        """A command sent TO the ground station: a leader's speed request (CONTRACTS.md)."""
+        if msg.target_system not in (0, self.link.mav.srcSystem):
+            return
+        if msg.command != mavlink.MAV_CMD_DO_CHANGE_SPEED:
+            result = mavlink.MAV_RESULT_UNSUPPORTED
+        else:
+            result = mavlink.MAV_RESULT_ACCEPTED
+            seq = int(msg.y) if msg.get_type() == "COMMAND_INT" else None
+            if seq is None or seq not in self._leader_seqs:
+                if seq is not None:
+                    self._leader_seqs.add(seq)
+                request = LeaderRequest(self.uav_id, seq, float(msg.param2), now)
+                self._leader_requests.append(request)
+                self.emit("leader_request", f"leader asks for {msg.param2:g} m/s", now)
+        seq = int(msg.y) if msg.get_type() == "COMMAND_INT" else 0
+        ack = self.link.mav.command_ack_encode(
+            msg.command, result, 0, seq, msg.get_srcSystem(), msg.get_srcComponent()
+        )
+        self.link.send(ack, now)
+
+
+def _result_name(result: int | None) -> str:
+    if result is None:
+        return "no answer"
+    entry = mavlink.enums["MAV_RESULT"].get(result)
+    return entry.name if entry else str(result)
+
+
+_HANDLERS: dict[str, Callable[[Driver, object, float], None]] = {
+    "HEARTBEAT": Driver._on_heartbeat,
+    "GLOBAL_POSITION_INT": Driver._on_global_position,
+    "HOME_POSITION": Driver._on_home_position,
+    "SIM_STATE": Driver._on_sim_state,
+    "EXTENDED_SYS_STATE": Driver._on_extended_sys_state,
+    "SYS_STATUS": Driver._on_sys_status,
+    "STATUSTEXT": Driver._on_statustext,
+    "COMMAND_ACK": Driver._on_command_ack,
+    "COMMAND_INT": Driver._on_command,
+    "COMMAND_LONG": Driver._on_command,
+}
+
+_PHASE_STEPS: dict[Phase, Callable[[Driver, float], None]] = {
+    Phase.CONNECTING: Driver._step_connecting,
+    Phase.INITIALISING: Driver._step_initialising,
+    Phase.ARMING: Driver._step_arming,
+    Phase.TAKING_OFF: Driver._step_taking_off,
+    Phase.LANDING: Driver._step_landing,
+}
+
+
+@dataclass(frozen=True)
+class FleetProblem:
+    """Something wrong with the vehicles themselves (e.g. a simulator process exited)."""
+
+    text: str
+    uavs: tuple[int, ...] = ()  # the UAV ids (1-based) it affects
+
+
+class Fleet(ABC):
+    """Where the UAVs' links come from: a backend that starts vehicles (sim) or fixed URLs.
+
+    A context manager: leaving it always stops whatever it started (even on Ctrl-C).
+    """
+
+    @abstractmethod
+    def start(self) -> list[str]:
+        """Start (or locate) the vehicles; return one MAVLink connection string per UAV."""
+
+    def poll(self) -> list[FleetProblem]:
+        """Problems noticed since the last call (e.g. a vehicle process that exited)."""
+        return []
+
+    def close(self) -> None:
+        """Stop whatever `start` started (idempotent)."""
+        return None
+
+    def __enter__(self) -> Fleet:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class ExternalFleet(Fleet):
+    """Vehicles started by someone else (SITL, real UAVs): the connection strings are given."""
+
+    def __init__(self, urls: list[str]) -> None:
+        self.urls = list(urls)
+
+    def start(self) -> list[str]:
+        return list(self.urls)

@@ -1,0 +1,201 @@
+"""PX4 multicopter driver (as recorded from PX4 SITL SIH, `shared/sitl/README.md`).
+
+* PX4 streams its telemetry on its offboard/API link (instance i sends towards UDP 14540+i);
+  the driver only raises GLOBAL_POSITION_INT to 10 Hz.
+* OFFBOARD needs a setpoint stream first: the runtime streams (this family
+  `needs_setpoint_stream_before_offboard`), the driver selects OFFBOARD once the stream is
+  established and arms when the SYS_STATUS pre-arm bit is set (PX4 sets it in health only; in
+  OFFBOARD it means "offboard signal present"). While disarmed PX4 accepts OFFBOARD without a
+  stream and refuses at arming (`Arming denied: Resolve system health failures first`), so the
+  driver never relies on the mode ack alone.
+* Every MAV_CMD_DO_SET_MODE is answered twice: the first ACCEPTED, the second the verdict.
+* The stream must stay above 2 Hz: after COM_OF_LOSS_T (1 s) without a setpoint PX4 falls back
+  to position control (POSCTL, system status CRITICAL); the driver reports it as a `failsafe`
+  event and goes to HOLDING. Back in FOLLOWING (the runtime's `resume`), it selects OFFBOARD
+  again as soon as the stream flows (PX4 refuses OFFBOARD while armed without a stream:
+  `Switching to Offboard is currently not available`).
+* Take-off is by the stream (OFFBOARD climbs to the setpoint altitude), landing with
+  MAV_CMD_NAV_LAND (AUTO.LAND); PX4 stays armed after `Landing detected` until it is
+  disarmed, so the driver disarms once landed.
+* PX4's home carries a metre or two of GPS noise: the home check tolerates 3 m.
+* PX4's EVENT messages (id 410) are not in pymavlink's dialect: the link counts them as bad data
+  and the STATUSTEXT that accompanies each one carries the text.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+import numpy as np
+
+from gcs.drivers.autopilot import AutopilotDriver
+from gcs.drivers.base import CommandSpec, FlightMode, Phase, mavlink
+
+
+def px4_custom_mode(main: int, sub: int = 0) -> int:
+    """HEARTBEAT custom_mode of a PX4 main mode and sub-mode (px4_custom_mode.h)."""
+    return (main << 16) | (sub << 24)
+
+
+MAIN_POSCTL, MAIN_AUTO, MAIN_OFFBOARD = 3, 4, 6
+SUB_TAKEOFF, SUB_LOITER, SUB_RTL, SUB_LAND = 2, 3, 5, 6
+OFFBOARD = px4_custom_mode(MAIN_OFFBOARD)
+AUTO_LOITER = px4_custom_mode(MAIN_AUTO, SUB_LOITER)
+AUTO_LAND = px4_custom_mode(MAIN_AUTO, SUB_LAND)
+AUTO_RTL = px4_custom_mode(MAIN_AUTO, SUB_RTL)
+POSCTL = px4_custom_mode(MAIN_POSCTL)
+#: Logical mode -> (main mode, sub-mode) for MAV_CMD_DO_SET_MODE params 2 and 3.
+PX4_MODES = {
+    FlightMode.GUIDED: (MAIN_OFFBOARD, 0),
+    FlightMode.HOLD: (MAIN_AUTO, SUB_LOITER),
+    FlightMode.LAND: (MAIN_AUTO, SUB_LAND),
+}
+_MODE_OF_CUSTOM = {px4_custom_mode(*pair): mode for mode, pair in PX4_MODES.items()}
+_MODE_NAMES = {OFFBOARD: "OFFBOARD", AUTO_LOITER: "AUTO.LOITER", AUTO_LAND: "AUTO.LAND",
+               AUTO_RTL: "AUTO.RTL", POSCTL: "POSCTL",
+               px4_custom_mode(MAIN_AUTO, SUB_TAKEOFF): "AUTO.TAKEOFF"}  # fmt: skip
+
+
+class PX4Driver(AutopilotDriver):
+    """Driver of one PX4 multicopter (SITL or real) over its offboard MAVLink link."""
+
+    family = "px4"
+    connect_timeout_s = 30.0
+    initialise_timeout_s = 60.0
+    arming_timeout_s = 20.0
+    takeoff_timeout_s = 90.0
+    #: Without the pre-arm bit, ARM anyway after this long in OFFBOARD to learn why not.
+    arm_without_prearm_after_s: ClassVar[float] = 5.0
+    #: The stream counts as flowing after this long (vehicle time) of setpoints.
+    stream_established_s: ClassVar[float] = 0.5
+    #: A gap longer than this (vehicle time) starts a new streak (half of COM_OF_LOSS_T).
+    stream_gap_s: ClassVar[float] = 0.5
+
+    stream_rates_hz: ClassVar[dict[int, float]] = {
+        mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
+    }
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.prearm: bool | None = None  # SYS_STATUS health pre-arm bit (PX4: health only)
+        self._guided_since: float | None = None
+        self._stream_since: float | None = None  # start of the current setpoint streak
+        self._last_setpoint: float | None = None
+        self._disarm_sent = False
+
+    # ------------------------------------------------------------------ family hooks
+    def mode_command(self, mode: FlightMode) -> CommandSpec:
+        main, sub = PX4_MODES[mode]
+        return CommandSpec(
+            mavlink.MAV_CMD_DO_SET_MODE,
+            (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub, 0, 0, 0, 0),
+            label=f"mode {_MODE_NAMES[px4_custom_mode(main, sub)]}",
+            acks_needed=2,
+        )
+
+    def current_mode(self) -> FlightMode | None:
+        return _MODE_OF_CUSTOM.get(self.telemetry.custom_mode)
+
+    def takeoff_command(self, relative_altitude: float) -> CommandSpec | None:
+        return None  # OFFBOARD climbs to the streamed setpoint
+
+    def landing_command(self) -> CommandSpec:
+        nan = math.nan
+        return CommandSpec(
+            mavlink.MAV_CMD_NAV_LAND, (0, 0, 0, nan, nan, nan, nan), label="land here"
+        )
+
+    def position_ready(self) -> bool:
+        # In OFFBOARD the pre-arm bit says whether setpoints arrive: not a position matter.
+        armable = self.prearm or self.telemetry.custom_mode == OFFBOARD
+        return super().position_ready() and bool(armable)
+
+    def arm_allowed(self, now: float) -> bool:
+        if self._guided_since is None:
+            self._guided_since = now
+        waited = now - self._guided_since > self.timing.wall(self.arm_without_prearm_after_s)
+        return bool(self.prearm) or waited
+
+    def vehicle_mode_phase(self) -> Phase:
+        if self.telemetry.custom_mode in (AUTO_LAND, AUTO_RTL):
+            return Phase.LANDING
+        return Phase.HOLDING
+
+    def describe_mode(self) -> str:
+        custom = self.telemetry.custom_mode
+        name = _MODE_NAMES.get(custom, f"0x{custom or 0:08X}")
+        if custom == POSCTL and self.telemetry.system_status == mavlink.MAV_STATE_CRITICAL:
+            return f"{name} (offboard-loss failsafe)"
+        return name
+
+    # ------------------------------------------------------------------ capabilities
+    @property
+    def needs_setpoint_stream_before_offboard(self) -> bool:
+        return True
+
+    @property
+    def home_tolerance_m(self) -> float:
+        return 3.0  # PX4's home carries a metre or two of GPS noise
+
+    # ------------------------------------------------------------------ Driver overrides
+    def on_message(self, msg, now: float) -> None:
+        if msg.get_type() == "SYS_STATUS":
+            self.prearm = bool(
+                msg.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK
+            )
+        super().on_message(msg, now)
+
+    def send_setpoint(
+        self,
+        position_enu: np.ndarray,
+        velocity_enu: np.ndarray,
+        acceleration_enu: np.ndarray | None,
+        mission_time: float,
+        now: float,
+        geodetic: np.ndarray | None = None,
+    ) -> None:
+        if self._last_setpoint is None or now - self._last_setpoint > self.timing.wall(
+            self.stream_gap_s, floor=0.3
+        ):
+            self._stream_since = now  # a new streak
+        self._last_setpoint = now
+        super().send_setpoint(
+            position_enu, velocity_enu, acceleration_enu, mission_time, now, geodetic
+        )
+
+    def step(self, now: float) -> None:
+        if self.phase != Phase.ARMING or self.current_mode() != FlightMode.GUIDED:
+            self._guided_since = None
+        super().step(now)
+        if self.phase == Phase.FOLLOWING:
+            self._reenter_offboard(now)
+        elif self.phase == Phase.LANDED and self.telemetry.armed and not self._disarm_sent:
+            self._disarm_sent = True
+            self.send_command(
+                CommandSpec(
+                    mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (0, 0, 0, 0, 0, 0, 0), label="disarm"
+                ),
+                now,
+            )
+
+    # ------------------------------------------------------------------ helpers
+    def stream_flowing(self, now: float) -> bool:
+        """Setpoints have been flowing without a gap for `stream_established_s`."""
+        if self._stream_since is None or self._last_setpoint is None:
+            return False
+        recent = now - self._last_setpoint <= self.timing.wall(0.3, floor=0.3)
+        return recent and now - self._stream_since >= self.timing.wall(
+            self.stream_established_s, floor=0.1
+        )
+
+    def _reenter_offboard(self, now: float) -> None:
+        """Back to OFFBOARD after a failsafe, once the stream flows again (paced)."""
+        if self.current_mode() == FlightMode.GUIDED or "mode" in self._pending:
+            return
+        if now < max(self._backoff_until, self._mode_confirm_until):
+            return
+        if not self.stream_flowing(now):
+            return
+        self._request_mode(FlightMode.GUIDED, now)
+        self._back_off(now)

@@ -1,0 +1,258 @@
+"""The simulated backend: `vehicles sim` processes and their (ArduCopter-like) driver.
+
+`SimFleet` starts one `vehicles sim` process per UAV (or one process hosting every UAV with
+`per_process > 1`), each UAV on its own free loopback UDP port, homed on its parking slot, with
+the run's speedup; it always stops them (`close`, also on exceptions and Ctrl-C) and reports a
+process that died. `SimDriver` speaks to one simulated UAV: ArduCopter mode numbers, mode
+changes by `MAV_CMD_DO_SET_MODE` (acknowledged), `MAV_CMD_NAV_TAKEOFF` to a relative altitude,
+acceleration feed-forward, and speed changes whose effective time and sequence number the
+vehicle honours.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gcs.drivers.base import CommandSpec, Driver, Fleet, FleetProblem, FlightMode
+from gcs.geodesy import Origin
+from gcs.link import mavutil
+
+log = logging.getLogger(__name__)
+mavlink = mavutil.mavlink
+
+#: ArduCopter custom modes the simulated vehicles implement (see ../shared/sitl/README.md).
+COPTER_MODES = {FlightMode.GUIDED: 4, FlightMode.HOLD: 5, FlightMode.LAND: 9}
+_MODE_OF_NUMBER = {number: mode for mode, number in COPTER_MODES.items()}
+#: NAMED_VALUE_INT name carrying the GCS's mission time to the simulated vehicles.
+MISSION_TIME_NAME = b"MSN_TIME"
+
+
+class SimDriver(Driver):
+    """Driver of one `vehicles sim` UAV (ArduCopter-compatible MAVLink)."""
+
+    family = "sim"
+    connect_timeout_s = 30.0
+    connect_wall_floor_s = 20.0  # a Python process starting on a busy 2-core machine
+    initialise_timeout_s = 30.0
+
+    def mode_command(self, mode: FlightMode) -> CommandSpec:
+        return CommandSpec(
+            mavlink.MAV_CMD_DO_SET_MODE,
+            (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, COPTER_MODES[mode], 0, 0, 0, 0, 0),
+            label=f"mode {mode.value}",
+        )
+
+    def current_mode(self) -> FlightMode | None:
+        return _MODE_OF_NUMBER.get(self.telemetry.custom_mode)
+
+    def takeoff_command(self, relative_altitude: float) -> CommandSpec | None:
+        return CommandSpec(
+            mavlink.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, relative_altitude), label="takeoff"
+        )
+
+    def on_heartbeat_sent(self, now: float) -> None:
+        """The vehicles' mission clock: NAMED_VALUE_INT "MSN_TIME" = mission time in ms at
+        sending (vehicles/fleet_speed.py); a leader sends its requests on that clock."""
+        mission_time = self.mission_clock(now)
+        if mission_time is None:
+            return
+        msg = self.link.mav.named_value_int_encode(
+            self._boot_ms(now), MISSION_TIME_NAME, int(round(mission_time * 1000))
+        )
+        self.link.send(msg, now)
+
+    @property
+    def accepts_acceleration_feedforward(self) -> bool:
+        return True
+
+    @property
+    def honours_speed_change_time(self) -> bool:
+        return True
+
+    @property
+    def home_tolerance_m(self) -> float:
+        return 0.5
+
+
+def free_udp_port(host: str = "127.0.0.1") -> int:
+    """A UDP port nobody uses right now (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind((host, 0))
+        return sock.getsockname()[1]
+
+
+@dataclass
+class SimVehicleSetup:
+    """How to start the simulated UAVs (what `SimFleet` passes to `vehicles sim`)."""
+
+    homes: np.ndarray  # (N, 2) local x, y of each UAV's start (its parking slot at A)
+    origin: Origin  # the mission's origin: the vehicles' local frame is the mission's
+    speedup: float = 1.0
+    seed: int = 1
+    sysid_base: int = 1
+    per_process: int = 1  # UAVs per `vehicles sim` process
+    max_speed: float | None = None
+    max_acceleration: float | None = None
+    wind_mps: tuple[float, float] = (0.0, 0.0)  # mean wind east, north
+    gust_mps: float | None = None
+    navigation_noise_m: float | None = None
+    leaders: dict[int, list[tuple[float, float]]] = field(default_factory=dict)
+    extra_args: tuple[str, ...] = ()
+    log_dir: Path | None = None  # where each process's stderr goes (None: discarded)
+
+    def groups(self) -> list[list[int]]:
+        """UAV indexes (0-based) per process: runs of consecutive UAVs (a process numbers its
+        vehicles' system ids consecutively), at most `per_process` long; a leader (one per
+        process) always gets a process of its own."""
+        leaders = {uav - 1 for uav in self.leaders}
+        groups: list[list[int]] = []
+        for k in range(len(self.homes)):
+            alone = k in leaders
+            if (
+                alone
+                or not groups
+                or len(groups[-1]) >= self.per_process
+                or groups[-1][0] in leaders
+            ):
+                groups.append([k])
+            else:
+                groups[-1].append(k)
+        return groups
+
+
+class SimFleet(Fleet):
+    """Starts and always stops the `vehicles sim` processes of a run."""
+
+    host = "127.0.0.1"
+
+    def __init__(self, setup: SimVehicleSetup) -> None:
+        self.setup = setup
+        self.processes: list[subprocess.Popen] = []
+        self.groups: list[tuple[int, ...]] = []  # UAV ids (1-based) of each process
+        self.ports: dict[int, int] = {}  # UAV id -> UDP port
+        self._reported: set[int] = set()
+
+    def start(self) -> list[str]:
+        for group in self.setup.groups():
+            port = self._free_block(len(group))
+            for i, k in enumerate(group):
+                self.ports[k + 1] = port + i
+            self.processes.append(self._spawn(group, port))
+            self.groups.append(tuple(k + 1 for k in group))
+        return [f"udpout:{self.host}:{self.ports[uav]}" for uav in sorted(self.ports)]
+
+    def vehicle_command(self, group: list[int], port: int) -> list[str]:
+        """The `vehicles sim` command line for UAVs `group` (0-based, consecutive ports)."""
+        s = self.setup
+        origin = s.origin
+        positions = ";".join(f"{s.homes[k][0]:.4f},{s.homes[k][1]:.4f}" for k in group)
+        cmd = [
+            sys.executable,
+            "-m",
+            "vehicles",
+            "sim",
+            "--count",
+            str(len(group)),
+            "--base-port",
+            str(port),
+            "--sysid-base",
+            str(s.sysid_base + group[0]),
+            "--speedup",
+            f"{s.speedup:g}",
+            "--seed",
+            str(s.seed),
+            # FLAG=VALUE: a value starting with "-" (a negative coordinate) is not an option
+            f"--home={origin.lat:.9f},{origin.lon:.9f},{origin.alt:.3f}",
+            f"--positions={positions}",
+        ]
+        if s.max_speed is not None:
+            cmd += ["--max-speed", f"{s.max_speed:g}"]
+        if s.max_acceleration is not None:
+            cmd += ["--max-acceleration", f"{s.max_acceleration:g}"]
+        if any(s.wind_mps):
+            cmd += [f"--wind={s.wind_mps[0]:g},{s.wind_mps[1]:g}"]
+        if s.gust_mps is not None:
+            cmd += ["--gust", f"{s.gust_mps:g}"]
+        if s.navigation_noise_m is not None:
+            cmd += ["--nav-noise", f"{s.navigation_noise_m:g}"]
+        if len(group) == 1 and group[0] + 1 in s.leaders:
+            requests = ",".join(f"{at:g}:{speed:g}" for at, speed in s.leaders[group[0] + 1])
+            cmd += ["--leader-requests", requests, "--leader-sysid", str(s.sysid_base + group[0])]
+        return cmd + list(s.extra_args)
+
+    def poll(self) -> list[FleetProblem]:
+        problems = []
+        for index, process in enumerate(self.processes):
+            code = process.poll()
+            if code is not None and index not in self._reported:
+                self._reported.add(index)
+                uavs = self.groups[index]
+                who = ", ".join(map(str, uavs))
+                text = f"vehicle process of UAV {who} (pid {process.pid}) exited with {code}"
+                problems.append(FleetProblem(text, uavs))
+        return problems
+
+    def close(self) -> None:
+        """SIGTERM every process, then SIGKILL what is still alive after a grace period."""
+        for process in self.processes:
+            if process.poll() is None:
+                process.send_signal(signal.SIGTERM)
+        for process in self.processes:
+            try:
+                process.wait(timeout=3.0)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(timeout=3.0)
+        for process in self.processes:
+            if process.stderr is not None and not process.stderr.closed:
+                process.stderr.close()
+
+    def _spawn(self, group: list[int], port: int) -> subprocess.Popen:
+        cmd = self.vehicle_command(group, port)
+        log.info("starting %s", " ".join(cmd))
+        stderr = subprocess.DEVNULL
+        if self.setup.log_dir is not None:
+            self.setup.log_dir.mkdir(parents=True, exist_ok=True)
+            stderr = open(self.setup.log_dir / f"vehicles-{group[0] + 1}.log", "wb")  # noqa: SIM115
+        root = str(Path(__file__).resolve().parents[2])  # the tree holding `vehicles`
+        path = os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))
+        try:
+            return subprocess.Popen(
+                cmd,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=stderr,
+                env={**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": path},
+                start_new_session=True,  # Ctrl-C in the terminal reaches the GCS only
+            )
+        finally:
+            if stderr is not subprocess.DEVNULL:
+                stderr.close()
+
+    def _free_block(self, size: int) -> int:
+        """A base port with `size` free consecutive UDP ports."""
+        for _ in range(50):
+            base = free_udp_port(self.host)
+            if base + size > 65535:
+                continue
+            if all(_udp_free(self.host, base + i) for i in range(1, size)):
+                return base
+        raise OSError(f"no block of {size} free UDP ports on {self.host}")
+
+
+def _udp_free(host: str, port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        try:
+            sock.bind((host, port))
+        except OSError:
+            return False
+        return True

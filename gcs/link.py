@@ -1,0 +1,190 @@
+"""One UAV's MAVLink link: a pymavlink `mavutil` connection, non-blocking, with raw capture.
+
+The runtime's single scheduler loop owns every link: it waits on `fileno()` of all of them at
+once (`selectors`), then calls `receive(now)` to drain what arrived. Nothing here blocks or
+starts a thread. Each datagram received and each message sent is handed, raw bytes plus the
+decoded message, to an optional `capture` callback (the recorder's `/mavlink/<n>/rx|tx`).
+
+A link is *alive* while any valid MAVLink message arrives from the expected system id
+(CONTRACTS.md, MAVLink), not only heartbeats: `last_valid_time` is the wall-clock time of the
+last such message.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+
+# MAVLink 2 from the first packet sent (pymavlink reads this once, when mavutil is imported).
+os.environ.setdefault("MAVLINK20", "1")
+
+from pymavlink import mavutil  # noqa: E402
+
+log = logging.getLogger(__name__)
+
+#: The ground station's MAVLink identity (CONTRACTS.md: the GCS is system 255).
+GCS_SYSTEM_ID = 255
+GCS_COMPONENT_ID = mavutil.mavlink.MAV_COMP_ID_MISSIONPLANNER  # 190
+
+#: Bound on the messages one `receive` call drains (the scheduler must get back to its tick).
+MAX_MESSAGES_PER_RECEIVE = 10_000
+
+#: Called for every message in or out: (direction "rx" | "tx", raw bytes, message, wall time).
+Capture = Callable[[str, bytes, object, float], None]
+
+
+def _reset_parser(mav) -> None:
+    """Forget a partial frame (pymavlink's initial parser state)."""
+    mav.buf = bytearray()
+    mav.buf_index = 0
+    mav.expected_length = mavutil.mavlink.HEADER_LEN_V1 + 2
+
+
+@dataclass
+class LinkCounters:
+    """Traffic counters of one link."""
+
+    received: int = 0  # valid messages from the expected system
+    foreign: int = 0  # valid messages from another system id (ignored)
+    bad: int = 0  # bytes that were not MAVLink
+    sent: int = 0
+
+
+class Link:
+    """A per-UAV MAVLink connection (any mavutil connection string, e.g. `udpout:127.0.0.1:P`).
+
+    `system_id` is the UAV's expected system id: messages from other systems are counted and
+    dropped, so they never keep a dead link alive.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        system_id: int,
+        *,
+        capture: Capture | None = None,
+        source_system: int = GCS_SYSTEM_ID,
+        source_component: int = GCS_COMPONENT_ID,
+    ) -> None:
+        self.url = url
+        self.system_id = system_id
+        self.capture = capture
+        self.counters = LinkCounters()
+        self.last_valid_time: float | None = None
+        self.seen_system_ids: set[int] = set()
+        self._now = 0.0
+        self._conn = mavutil.mavlink_connection(
+            url,
+            source_system=source_system,
+            source_component=source_component,
+        )
+        self._conn.mav.robust_parsing = True
+        self._conn.mav.set_send_callback(self._on_sent)
+
+    @property
+    def mav(self):
+        """The pymavlink `MAVLink` object: its `*_encode` methods build messages."""
+        return self._conn.mav
+
+    def fileno(self) -> int:
+        """Descriptor to wait on (selectors)."""
+        return self._conn.fd
+
+    def send(self, message, now: float) -> None:
+        """Send one message now (never blocks; a full socket buffer drops it, as UDP would)."""
+        self._now = now
+        try:
+            self._conn.mav.send(message)
+        except OSError as error:  # pragma: no cover - a vanished peer on a connected socket
+            log.debug("send on %s failed: %s", self.url, error)
+
+    def receive(self, now: float) -> list:
+        """Drain what is waiting on the socket; return the valid messages of this UAV."""
+        if isinstance(self._conn, mavutil.mavudp):
+            candidates = self._receive_datagrams()
+        else:
+            candidates = self._receive_stream()
+        messages = []
+        for message in candidates:
+            kind = message.get_type()
+            if kind == "BAD_DATA" or kind.startswith("UNKNOWN_"):
+                # an unknown message id cannot be checked (no CRC extra): not valid MAVLink
+                self.counters.bad += 1
+                continue
+            source = message.get_srcSystem()
+            self.seen_system_ids.add(source)
+            if self.capture is not None:
+                self.capture("rx", bytes(message.get_msgbuf()), message, now)
+            if source != self.system_id:
+                self.counters.foreign += 1
+                continue
+            self.counters.received += 1
+            self.last_valid_time = now
+            messages.append(message)
+        return messages
+
+    def _receive_datagrams(self) -> list:
+        """UDP: each datagram parsed on its own. A MAVLink frame never spans datagrams, so an
+        incomplete frame left at a datagram's end (garbage, truncation) is dropped instead of
+        swallowing the valid datagrams that follow."""
+        conn = self._conn
+        out = []
+        for _ in range(MAX_MESSAGES_PER_RECEIVE):
+            try:
+                data = conn.recv()
+            except OSError as error:  # the socket itself failed: try again on the next call
+                log.debug("receive on %s failed: %s", self.url, error)
+                break
+            if not data:
+                break
+            mav = conn.mav
+            try:
+                parsed = mav.parse_buffer(data) or []
+            except Exception as error:  # noqa: BLE001 - pymavlink raises bare errors on garbage
+                log.debug("undecodable datagram on %s: %s", self.url, error)
+                parsed = []
+                self.counters.bad += 1
+            if mav.buf_len() > 0:
+                self.counters.bad += 1
+                _reset_parser(mav)
+            for message in parsed:
+                conn.post_message(message)
+                out.append(message)
+        return out
+
+    def _receive_stream(self) -> list:
+        """TCP, serial...: pymavlink's own framing of the byte stream."""
+        conn = self._conn
+        out = []
+        for _ in range(MAX_MESSAGES_PER_RECEIVE):
+            try:
+                message = conn.recv_msg()
+            except OSError as error:
+                log.debug("receive on %s failed: %s", self.url, error)
+                break
+            except Exception as error:  # noqa: BLE001 - pymavlink raises bare errors on garbage
+                self.counters.bad += 1
+                log.debug("undecodable data on %s: %s", self.url, error)
+                continue
+            if message is None:
+                break
+            out.append(message)
+        return out
+
+    def silent_for(self, now: float) -> float:
+        """Seconds (wall) since the last valid message; infinite before the first one."""
+        return float("inf") if self.last_valid_time is None else now - self.last_valid_time
+
+    def close(self) -> None:
+        """Close the socket (idempotent)."""
+        try:
+            self._conn.close()
+        except OSError:  # pragma: no cover
+            pass
+
+    def _on_sent(self, message) -> None:
+        self.counters.sent += 1
+        if self.capture is not None:
+            self.capture("tx", bytes(message.get_msgbuf()), message, self._now)

@@ -1,0 +1,884 @@
+"""Mission file (YAML, version 1, CONTRACTS.md) -> a validated, frozen `Mission`.
+
+Everything CONTRACTS.md lists as refused is refused here with `InputError` (file, 0-based key
+path, what is expected, on one line), except the checks that need the planned path's fleet
+size (fixed size below the minimum of eq. 28, leader outside 1..N, connection count, parking
+rows vs obstacles and each other, eqs. 14-15): `gcs.planning` makes those, naming the key too.
+
+Types: numbers must be YAML numbers (a boolean is not a number, a string is never converted;
+`1e3` is read as a number, as YAML 1.2 does); integers must be integers. Unknown keys and
+duplicate keys are refused.
+
+Defaults (every key not listed as required is optional):
+
+* `name`: the file name without its extension.
+* `origin`: `{lat: -35.363262, lon: 149.165237, alt: 584.0}`, the default home of ArduPilot's
+  SITL (CMAC, Canberra), so a SITL fleet started with its defaults shares the frame.
+* `start.theta_deg`, `goal.theta_deg`: 0 (rows aligned with A->B).
+* `parking`: `segment` (rows as long as the fleet needs; `ray` is the paper's infinite rays).
+* `speed.initial`: `speed.max`; `speed.changes`: none; `speed.cap_to_safe`: false (a
+  `speed.max` above the safe formation speed is refused instead of capped, DESIGN 3.5).
+  A change's `leader` is a 1-based UAV number; `at` is the effective mission time, or for a
+  leader's request the time the leader sends it.
+* `fleet`: `{size: auto, backend: sim, connections: []}`.
+* `vehicle`: `{max_speed: 15, max_acceleration: 6, radius: 0.5}`; `vehicle.tracking_allowance`
+  (m): the part of the safety margin reserved for tracking error and navigation noise, default
+  30 % of `safety_margin`; the rest is the smoothing error budget used for the safe speed.
+* `base_stations`, `obstacles`, `ground_users`: none. `ground_users[i].rate_bps`: 800.
+* `sim`: `{setpoint_rate_hz: 10, seed: 1}`, `sim.noise`: `{wind_mean_mps: 0,
+  wind_direction_deg: 0, wind_gust_mps: 0.5, wind_time_s: 5, position_m: 0.1}` (mean wind,
+  direction it blows towards (counter-clockwise from east), standard deviation and
+  correlation time of the gusts, standard deviation of the navigation error on the reported
+  position).
+* `radio`: `{enabled: true, hop_latency_ms: 2, jitter_ms: 1, loss: 0}`.
+* `signing.key_file`: unset (the signing layer picks its default); paths are relative to the
+  mission file.
+
+Obstacles: `rectangle` (center, size, angle_deg) and `polygon` are solid polygons, `segment` a
+wall, `geojson` a file (relative to the mission file) of lon/lat footprints: Polygon and
+MultiPolygon features become solid polygons (holes ignored: a courtyard is not flyable),
+LineString and MultiLineString features walls; features without geometry are skipped.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import shapely
+import yaml
+
+from gcs.errors import InputError, join_key
+from gcs.geodesy import Origin, lonlat_to_local
+from planner.formation import DISTANCE_TOLERANCE, min_radio_range
+from planner.obstacles import Obstacles
+
+#: The only mission file version this code reads.
+VERSION = 1
+#: ArduPilot SITL's default home, the documented default origin.
+DEFAULT_ORIGIN = Origin(lat=-35.363262, lon=149.165237, alt=584.0)
+#: Fraction of the safety margin reserved for tracking error and noise by default.
+DEFAULT_TRACKING_FRACTION = 0.3
+#: Footprints further than this from the origin are refused (a wrong origin, most likely).
+MAX_FOOTPRINT_DISTANCE_M = 100_000.0
+BACKENDS = ("sim", "ardupilot", "px4")
+PARKING = ("segment", "ray")
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A (departure or arrival) point and the angle of its parking row vs A->B, degrees."""
+
+    x: float
+    y: float
+    theta_deg: float = 0.0
+
+    @property
+    def xy(self) -> np.ndarray:
+        return np.array([self.x, self.y])
+
+
+@dataclass(frozen=True)
+class Point:
+    """A point of the local frame (a base station), metres."""
+
+    x: float
+    y: float
+
+    @property
+    def xy(self) -> np.ndarray:
+        return np.array([self.x, self.y])
+
+
+@dataclass(frozen=True)
+class SpeedChange:
+    """A scheduled speed change: effective time `at` (s), new speed (m/s), optional leader.
+
+    With a `leader` (1-based UAV number) `at` is when that UAV sends the request.
+    """
+
+    at: float
+    speed: float
+    leader: int | None = None
+
+
+@dataclass(frozen=True)
+class SpeedSchedule:
+    """v_max, v(0) and the scheduled changes (eq. 6, sec. III-B)."""
+
+    max: float
+    initial: float
+    changes: tuple[SpeedChange, ...] = ()
+    cap_to_safe: bool = False
+
+
+@dataclass(frozen=True)
+class Fleet:
+    """Fleet size (None = `auto`, the minimum of eq. 28), backend and MAVLink connections."""
+
+    size: int | None = None
+    backend: str = "sim"
+    connections: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """What the GCS assumes of each airframe (and the simulator simulates)."""
+
+    max_speed: float = 15.0
+    max_acceleration: float = 6.0
+    radius: float = 0.5
+    tracking_allowance: float = 0.0  # metres; resolved from the safety margin when absent
+
+
+@dataclass(frozen=True)
+class GroundUser:
+    """A data source on the ground (x, y in metres, rate in bit/s)."""
+
+    x: float
+    y: float
+    rate_bps: float = 800.0
+
+
+@dataclass(frozen=True)
+class SimNoise:
+    """Wind and navigation noise of the simulated vehicles (see the module docstring)."""
+
+    wind_mean_mps: float = 0.0
+    wind_direction_deg: float = 0.0
+    wind_gust_mps: float = 0.5
+    wind_time_s: float = 5.0
+    position_m: float = 0.1
+
+
+@dataclass(frozen=True)
+class Sim:
+    """Simulated backend: setpoint rate, random seed, noise."""
+
+    setpoint_rate_hz: float = 10.0
+    seed: int = 1
+    noise: SimNoise = field(default_factory=SimNoise)
+
+
+@dataclass(frozen=True)
+class Radio:
+    """Emulated radio medium of the sim backend (range is the mission's `radio_range`)."""
+
+    enabled: bool = True
+    hop_latency_ms: float = 2.0
+    jitter_ms: float = 1.0
+    loss: float = 0.0
+
+
+@dataclass(frozen=True)
+class Signing:
+    """MAVLink 2 signing: key file (absolute, resolved from the mission file), or None."""
+
+    key_file: Path | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Mission:
+    """A validated mission. `obstacle_keys[i]` is the key path of `obstacles.geometries[i]`."""
+
+    source: Path
+    text: str
+    version: int
+    name: str
+    origin: Origin
+    start: Pose
+    goal: Pose
+    safety_margin: float
+    radio_range: float
+    altitude: float
+    parking: str
+    speed: SpeedSchedule
+    fleet: Fleet
+    vehicle: Vehicle
+    base_stations: tuple[Point, ...]
+    obstacles: Obstacles
+    obstacle_keys: tuple[str, ...]
+    ground_users: tuple[GroundUser, ...]
+    sim: Sim
+    radio: Radio
+    signing: Signing
+
+    @property
+    def error_budget(self) -> float:
+        """Smoothing error allowed at bends: rho_c minus the tracking allowance (DESIGN 3.5)."""
+        return self.safety_margin - self.vehicle.tracking_allowance
+
+
+def load_mission(path: str | Path) -> Mission:
+    """Read and validate a mission file; raise `InputError` on anything CONTRACTS.md refuses."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except IsADirectoryError:
+        raise InputError(path, "", "a mission file, got a directory") from None
+    except UnicodeDecodeError:
+        raise InputError(path, "", "a UTF-8 YAML text file") from None
+    except OSError as exc:
+        raise InputError(path, "", f"a readable file ({exc.strerror or exc})") from None
+    try:
+        data = yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+    except _DuplicateKey as exc:
+        raise InputError(path, exc.key, f"each key once (duplicate at line {exc.line})") from None
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        at = f" at line {where.line + 1}, column {where.column + 1}" if where else ""
+        problem = getattr(exc, "problem", None) or "syntax error"
+        raise InputError(path, "", f"valid YAML ({problem}{at})") from None
+    return parse_mission(data, path, text)
+
+
+def parse_mission(data: Any, source: Path, text: str = "") -> Mission:
+    """Validate already-parsed YAML `data` read from `source` (for paths and messages)."""
+    return _Parser(Path(source)).mission(data, text)
+
+
+# --- YAML loading --------------------------------------------------------------------------
+
+
+class _DuplicateKey(yaml.YAMLError):
+    def __init__(self, key: Any, line: int) -> None:
+        super().__init__(f"duplicate key {key!r}")
+        self.key = str(key)
+        self.line = line
+
+
+class _Loader(yaml.SafeLoader):
+    """Safe YAML loader that refuses duplicate keys and reads YAML 1.2 floats such as 1e3."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen = set()
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                duplicate = key in seen
+                seen.add(key)
+            except TypeError:  # unhashable key: let the base class refuse it
+                continue
+            if duplicate:
+                raise _DuplicateKey(key, key_node.start_mark.line + 1)
+        return super().construct_mapping(node, deep=deep)
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
+# --- validation ----------------------------------------------------------------------------
+
+
+def _describe(value: Any) -> str:
+    """How a refused value is shown: its YAML spelling and kind."""
+    if isinstance(value, bool):
+        return f"{str(value).lower()} (a boolean)"
+    if value is None:
+        return "nothing (null)"
+    if isinstance(value, str):
+        shown = value if len(value) <= 40 else value[:37] + "..."
+        return f"{shown!r} (a string)"
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return f"a list of {len(value)}"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return repr(value)
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.6g}"
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+class _Parser:
+    """Walks the YAML tree with key paths; every refusal raises `InputError`."""
+
+    def __init__(self, source: Path) -> None:
+        self.source = source
+
+    def fail(self, path: str, expected: str) -> InputError:
+        return InputError(self.source, path, expected)
+
+    # primitive readers
+
+    def mapping(
+        self, value: Any, path: str, allowed: tuple[str, ...], required: tuple[str, ...] = ()
+    ) -> dict:
+        if not isinstance(value, dict):
+            keys = ", ".join(allowed)
+            what = "the mission as a mapping of keys" if not path else f"a mapping ({keys})"
+            raise self.fail(path, f"{what}, got {_describe(value)}")
+        for key in value:
+            if not isinstance(key, str) or key not in allowed:
+                raise self.fail(
+                    join_key(path, str(key)), f"a known key: one of {', '.join(allowed)}"
+                )
+        for key in required:
+            if key not in value:
+                raise self.fail(join_key(path, key), "this required key")
+        return value
+
+    def sequence(self, value: Any, path: str, what: str) -> list:
+        if not isinstance(value, list):
+            raise self.fail(path, f"a list of {what}, got {_describe(value)}")
+        return value
+
+    def number(
+        self,
+        value: Any,
+        path: str,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        low_open: bool = False,
+        high_open: bool = False,
+        unit: str = "",
+    ) -> float:
+        """A finite YAML number within [low, high] (open ends where asked)."""
+        suffix = f" ({unit})" if unit else ""
+        if low == 0 and low_open and high is None:
+            want = f"a finite number > 0{suffix}"
+        elif low == 0 and not low_open and high is None:
+            want = f"a finite number >= 0{suffix}"
+        elif low is not None and high is not None:
+            lo, hi = "(" if low_open else "[", ")" if high_open else "]"
+            want = f"a number in {lo}{_fmt(low)}, {_fmt(high)}{hi}{suffix}"
+        else:
+            want = f"a finite number{suffix}"
+        if not _is_number(value) or not math.isfinite(value):
+            raise self.fail(path, f"{want}, got {_describe(value)}")
+        value = float(value)
+        if low is not None and (value < low or (low_open and value <= low)):
+            raise self.fail(path, f"{want}, got {_fmt(value)}")
+        if high is not None and (value > high or (high_open and value >= high)):
+            raise self.fail(path, f"{want}, got {_fmt(value)}")
+        return value
+
+    def positive(self, value: Any, path: str, unit: str = "") -> float:
+        return self.number(value, path, low=0.0, low_open=True, unit=unit)
+
+    def nonnegative(self, value: Any, path: str, unit: str = "") -> float:
+        return self.number(value, path, low=0.0, unit=unit)
+
+    def integer(self, value: Any, path: str, low: int | None = None) -> int:
+        want = "an integer" if low is None else f"an integer >= {low}"
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise self.fail(path, f"{want}, got {_describe(value)}")
+        if low is not None and value < low:
+            raise self.fail(path, f"{want}, got {value}")
+        return value
+
+    def boolean(self, value: Any, path: str) -> bool:
+        if not isinstance(value, bool):
+            raise self.fail(path, f"true or false, got {_describe(value)}")
+        return value
+
+    def string(self, value: Any, path: str, what: str = "a non-empty string") -> str:
+        if not isinstance(value, str) or not value.strip():
+            raise self.fail(path, f"{what}, got {_describe(value)}")
+        return value
+
+    def choice(self, value: Any, path: str, options: tuple[str, ...]) -> str:
+        if not isinstance(value, str) or value not in options:
+            raise self.fail(path, f"one of {', '.join(options)}, got {_describe(value)}")
+        return value
+
+    def point(self, value: Any, path: str) -> np.ndarray:
+        if not isinstance(value, list) or len(value) != 2:
+            raise self.fail(path, f"a point [x, y] in metres, got {_describe(value)}")
+        return np.array([self.number(v, join_key(path, i), unit="m") for i, v in enumerate(value)])
+
+    # sections
+
+    def mission(self, data: Any, text: str) -> Mission:
+        root = self.mapping(
+            data,
+            "",
+            (
+                "version", "name", "origin", "start", "goal", "safety_margin", "radio_range",
+                "altitude", "parking", "speed", "fleet", "vehicle", "base_stations",
+                "obstacles", "ground_users", "sim", "radio", "signing",
+            ),
+            ("version", "start", "goal", "safety_margin", "radio_range", "altitude", "speed"),
+        )  # fmt: skip
+        version = root["version"]
+        if not isinstance(version, int) or isinstance(version, bool) or version != VERSION:
+            raise self.fail("version", f"{VERSION}, got {_describe(version)}")
+        name = self.name(root.get("name"))
+        origin = self.origin(root["origin"]) if "origin" in root else DEFAULT_ORIGIN
+        start = self.pose(root["start"], "start")
+        goal = self.pose(root["goal"], "goal")
+        safety_margin = self.positive(root["safety_margin"], "safety_margin", "m")
+        radio_range = self.positive(root["radio_range"], "radio_range", "m")
+        needed = min_radio_range(safety_margin)
+        if radio_range < needed - DISTANCE_TOLERANCE:
+            raise self.fail(
+                "radio_range",
+                f"at least 2(1+sqrt 2) x safety_margin = {_fmt(needed)} m (eq. 9), "
+                f"got {_fmt(radio_range)}",
+            )
+        altitude = self.positive(root["altitude"], "altitude", "m")
+        parking = self.choice(root.get("parking", "segment"), "parking", PARKING)
+        vehicle = self.vehicle(root.get("vehicle", {}), safety_margin)
+        speed = self.speed(root["speed"], vehicle)
+        fleet = self.fleet(root.get("fleet", {}))
+        base_stations = tuple(
+            Point(*self.xy_mapping(item, join_key("base_stations", i)))
+            for i, item in enumerate(
+                self.sequence(root.get("base_stations", []), "base_stations", "{x, y}")
+            )
+        )
+        obstacles, keys = self.obstacles(root.get("obstacles", []), origin)
+        ground_users = self.ground_users(root.get("ground_users", []))
+        sim = self.sim(root.get("sim", {}))
+        radio = self.radio(root.get("radio", {}))
+        signing = self.signing(root.get("signing", {}))
+        if np.linalg.norm(goal.xy - start.xy) <= DISTANCE_TOLERANCE:
+            raise self.fail("goal", f"a point different from start, got ({goal.x:g}, {goal.y:g})")
+        for key, pose in (("start", start), ("goal", goal)):
+            self.clear_of_obstacles(key, pose, obstacles, keys, safety_margin)
+        return Mission(
+            source=self.source,
+            text=text,
+            version=version,
+            name=name,
+            origin=origin,
+            start=start,
+            goal=goal,
+            safety_margin=safety_margin,
+            radio_range=radio_range,
+            altitude=altitude,
+            parking=parking,
+            speed=speed,
+            fleet=fleet,
+            vehicle=vehicle,
+            base_stations=base_stations,
+            obstacles=obstacles,
+            obstacle_keys=keys,
+            ground_users=ground_users,
+            sim=sim,
+            radio=radio,
+            signing=signing,
+        )
+
+    def name(self, value: Any) -> str:
+        if value is None:
+            stem = re.sub(r"[^A-Za-z0-9._-]", "-", self.source.stem).lstrip("._-")
+            return stem or "mission"
+        text = self.string(value, "name")
+        if not _NAME.match(text):
+            raise self.fail(
+                "name", f"letters, digits, '.', '_' or '-' (it names log files), got {text!r}"
+            )
+        return text
+
+    def origin(self, value: Any) -> Origin:
+        m = self.mapping(value, "origin", ("lat", "lon", "alt"), ("lat", "lon"))
+        lat = self.number(m["lat"], "origin.lat", low=-90.0, high=90.0, unit="degrees")
+        lon = self.number(m["lon"], "origin.lon", low=-180.0, high=180.0, unit="degrees")
+        alt = self.number(m.get("alt", 0.0), "origin.alt", unit="m")
+        return Origin(lat=lat, lon=lon, alt=alt)
+
+    def pose(self, value: Any, path: str) -> Pose:
+        m = self.mapping(value, path, ("x", "y", "theta_deg"), ("x", "y"))
+        return Pose(
+            x=self.number(m["x"], join_key(path, "x"), unit="m"),
+            y=self.number(m["y"], join_key(path, "y"), unit="m"),
+            theta_deg=self.number(m.get("theta_deg", 0.0), join_key(path, "theta_deg")),
+        )
+
+    def xy_mapping(self, value: Any, path: str) -> tuple[float, float]:
+        m = self.mapping(value, path, ("x", "y"), ("x", "y"))
+        return (
+            self.number(m["x"], join_key(path, "x"), unit="m"),
+            self.number(m["y"], join_key(path, "y"), unit="m"),
+        )
+
+    def vehicle(self, value: Any, safety_margin: float) -> Vehicle:
+        keys = ("max_speed", "max_acceleration", "radius", "tracking_allowance")
+        m = self.mapping(value, "vehicle", keys)
+        d = Vehicle()
+        radius = self.positive(m.get("radius", d.radius), "vehicle.radius", "m")
+        if radius >= safety_margin:
+            raise self.fail(
+                "vehicle.radius",
+                f"less than safety_margin ({_fmt(safety_margin)} m), got {_fmt(radius)}",
+            )
+        default_allowance = DEFAULT_TRACKING_FRACTION * safety_margin
+        allowance = self.number(
+            m.get("tracking_allowance", default_allowance),
+            "vehicle.tracking_allowance",
+            low=0.0,
+            high=safety_margin,
+            high_open=True,
+            unit="m (below safety_margin)",
+        )
+        return Vehicle(
+            max_speed=self.positive(m.get("max_speed", d.max_speed), "vehicle.max_speed", "m/s"),
+            max_acceleration=self.positive(
+                m.get("max_acceleration", d.max_acceleration), "vehicle.max_acceleration", "m/s^2"
+            ),
+            radius=radius,
+            tracking_allowance=allowance,
+        )
+
+    def speed(self, value: Any, vehicle: Vehicle) -> SpeedSchedule:
+        m = self.mapping(value, "speed", ("max", "initial", "changes", "cap_to_safe"), ("max",))
+        vmax = self.positive(m["max"], "speed.max", "m/s")
+        if vmax > vehicle.max_speed:
+            raise self.fail(
+                "speed.max",
+                f"at most vehicle.max_speed ({_fmt(vehicle.max_speed)} m/s), got {_fmt(vmax)}",
+            )
+        initial = vmax
+        if "initial" in m:
+            initial = self.nonnegative(m["initial"], "speed.initial", "m/s")
+            if initial > vmax:
+                raise self.fail(
+                    "speed.initial", f"at most speed.max ({_fmt(vmax)} m/s), got {_fmt(initial)}"
+                )
+        changes = []
+        items = self.sequence(m.get("changes", []), "speed.changes", "{at, speed[, leader]}")
+        for i, item in enumerate(items):
+            path = join_key("speed.changes", i)
+            c = self.mapping(item, path, ("at", "speed", "leader"), ("at", "speed"))
+            at = self.nonnegative(c["at"], join_key(path, "at"), "s")
+            if changes and at <= changes[-1].at:
+                raise self.fail(
+                    join_key(path, "at"),
+                    f"a time after speed.changes[{i - 1}].at ({_fmt(changes[-1].at)} s): "
+                    f"times strictly increasing, got {_fmt(at)}",
+                )
+            speed = self.number(
+                c["speed"],
+                join_key(path, "speed"),
+                low=0.0,
+                high=vmax,
+                unit="m/s, at most speed.max",
+            )
+            leader = None
+            if "leader" in c:
+                leader = self.integer(c["leader"], join_key(path, "leader"), low=1)
+            changes.append(SpeedChange(at=at, speed=speed, leader=leader))
+        last_path = f"speed.changes[{len(changes) - 1}].speed" if changes else "speed.initial"
+        last = changes[-1].speed if changes else initial
+        if last <= 0:
+            raise self.fail(last_path, "a last speed > 0 (the mission would never end), got 0")
+        cap = self.boolean(m.get("cap_to_safe", False), "speed.cap_to_safe")
+        return SpeedSchedule(max=vmax, initial=initial, changes=tuple(changes), cap_to_safe=cap)
+
+    def fleet(self, value: Any) -> Fleet:
+        m = self.mapping(value, "fleet", ("size", "backend", "connections"))
+        size_value = m.get("size", "auto")
+        size = None
+        if size_value != "auto":
+            if not isinstance(size_value, int) or isinstance(size_value, bool) or size_value < 1:
+                raise self.fail(
+                    "fleet.size", f"auto or an integer >= 1, got {_describe(size_value)}"
+                )
+            size = size_value
+        backend = self.choice(m.get("backend", "sim"), "fleet.backend", BACKENDS)
+        items = self.sequence(m.get("connections", []), "fleet.connections", "connection strings")
+        connections = tuple(
+            self.string(c, join_key("fleet.connections", i), "a MAVLink connection string")
+            for i, c in enumerate(items)
+        )
+        return Fleet(size=size, backend=backend, connections=connections)
+
+    def ground_users(self, value: Any) -> tuple[GroundUser, ...]:
+        out = []
+        for i, item in enumerate(self.sequence(value, "ground_users", "{x, y[, rate_bps]}")):
+            path = join_key("ground_users", i)
+            m = self.mapping(item, path, ("x", "y", "rate_bps"), ("x", "y"))
+            out.append(
+                GroundUser(
+                    x=self.number(m["x"], join_key(path, "x"), unit="m"),
+                    y=self.number(m["y"], join_key(path, "y"), unit="m"),
+                    rate_bps=self.positive(
+                        m.get("rate_bps", 800.0), join_key(path, "rate_bps"), "bit/s"
+                    ),
+                )
+            )
+        return tuple(out)
+
+    def sim(self, value: Any) -> Sim:
+        m = self.mapping(value, "sim", ("setpoint_rate_hz", "seed", "noise"))
+        d = Sim()
+        rate = self.positive(
+            m.get("setpoint_rate_hz", d.setpoint_rate_hz), "sim.setpoint_rate_hz", "Hz"
+        )
+        seed = self.integer(m.get("seed", d.seed), "sim.seed", low=0)
+        keys = ("wind_mean_mps", "wind_direction_deg", "wind_gust_mps", "wind_time_s", "position_m")
+        n = self.mapping(m.get("noise", {}), "sim.noise", keys)
+        dn = SimNoise()
+        noise = SimNoise(
+            wind_mean_mps=self.nonnegative(
+                n.get("wind_mean_mps", dn.wind_mean_mps), "sim.noise.wind_mean_mps", "m/s"
+            ),
+            wind_direction_deg=self.number(
+                n.get("wind_direction_deg", dn.wind_direction_deg), "sim.noise.wind_direction_deg"
+            ),
+            wind_gust_mps=self.nonnegative(
+                n.get("wind_gust_mps", dn.wind_gust_mps), "sim.noise.wind_gust_mps", "m/s"
+            ),
+            wind_time_s=self.positive(
+                n.get("wind_time_s", dn.wind_time_s), "sim.noise.wind_time_s", "s"
+            ),
+            position_m=self.nonnegative(
+                n.get("position_m", dn.position_m), "sim.noise.position_m", "m"
+            ),
+        )
+        return Sim(setpoint_rate_hz=rate, seed=seed, noise=noise)
+
+    def radio(self, value: Any) -> Radio:
+        m = self.mapping(value, "radio", ("enabled", "hop_latency_ms", "jitter_ms", "loss"))
+        d = Radio()
+        return Radio(
+            enabled=self.boolean(m.get("enabled", d.enabled), "radio.enabled"),
+            hop_latency_ms=self.nonnegative(
+                m.get("hop_latency_ms", d.hop_latency_ms), "radio.hop_latency_ms", "ms"
+            ),
+            jitter_ms=self.nonnegative(m.get("jitter_ms", d.jitter_ms), "radio.jitter_ms", "ms"),
+            loss=self.number(
+                m.get("loss", d.loss), "radio.loss", low=0.0, high=1.0, high_open=True
+            ),
+        )
+
+    def signing(self, value: Any) -> Signing:
+        m = self.mapping(value, "signing", ("key_file",))
+        if "key_file" not in m:
+            return Signing()
+        key = self.string(m["key_file"], "signing.key_file", "a file path")
+        return Signing(key_file=(self.source.parent / key).resolve())
+
+    # obstacles
+
+    def obstacles(self, value: Any, origin: Origin) -> tuple[Obstacles, tuple[str, ...]]:
+        polygons: list[np.ndarray] = []
+        polygon_keys: list[str] = []
+        walls: list[np.ndarray] = []
+        wall_keys: list[str] = []
+        kinds = ("rectangle", "polygon", "segment", "geojson")
+        items = self.sequence(
+            value, "obstacles", "obstacles (rectangle, polygon, segment, geojson)"
+        )
+        for i, item in enumerate(items):
+            path = join_key("obstacles", i)
+            m = self.mapping(item, path, kinds)
+            if len(m) != 1:
+                raise self.fail(path, f"exactly one of {', '.join(kinds)}, got {len(m)} keys")
+            (kind, spec), sub = next(iter(m.items())), join_key(path, next(iter(m)))
+            if kind == "rectangle":
+                polygons.append(self.rectangle(spec, sub))
+                polygon_keys.append(sub)
+            elif kind == "polygon":
+                polygons.append(self.polygon(spec, sub))
+                polygon_keys.append(sub)
+            elif kind == "segment":
+                walls.append(self.segment(spec, sub))
+                wall_keys.append(sub)
+            else:
+                geo_polys, geo_walls = self.geojson(spec, sub, origin)
+                polygons.extend(p for _, p in geo_polys)
+                polygon_keys.extend(f"{sub}.features[{k}]" for k, _ in geo_polys)
+                walls.extend(w for _, w in geo_walls)
+                wall_keys.extend(f"{sub}.features[{k}]" for k, _ in geo_walls)
+        obstacles = Obstacles(
+            polygons=tuple(polygons),
+            walls=np.array(walls, float).reshape(-1, 2, 2),
+        )
+        return obstacles, tuple(polygon_keys + wall_keys)
+
+    def rectangle(self, value: Any, path: str) -> np.ndarray:
+        m = self.mapping(value, path, ("center", "size", "angle_deg"), ("center", "size"))
+        center = self.point(m["center"], join_key(path, "center"))
+        size_path = join_key(path, "size")
+        size = m["size"]
+        if not isinstance(size, list) or len(size) != 2:
+            raise self.fail(size_path, f"[width, height] in metres, got {_describe(size)}")
+        size = np.array([self.positive(s, join_key(size_path, k), "m") for k, s in enumerate(size)])
+        angle = math.radians(self.number(m.get("angle_deg", 0.0), join_key(path, "angle_deg")))
+        half = 0.5 * size
+        corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half
+        rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+        return center + corners @ rot.T
+
+    def polygon(self, value: Any, path: str) -> np.ndarray:
+        if not isinstance(value, list) or len(value) < 3:
+            raise self.fail(path, f"a list of at least 3 points [x, y], got {_describe(value)}")
+        ring = np.array([self.point(p, join_key(path, k)) for k, p in enumerate(value)])
+        if np.allclose(ring[0], ring[-1]) and len(ring) > 3:
+            ring = ring[:-1]  # an explicitly closed ring
+        shape = shapely.Polygon(ring)
+        if not shape.is_valid or shape.area <= DISTANCE_TOLERANCE:
+            raise self.fail(path, "a simple polygon (no self-intersection, non-zero area)")
+        return ring
+
+    def segment(self, value: Any, path: str) -> np.ndarray:
+        if not isinstance(value, list) or len(value) != 2:
+            raise self.fail(path, f"two points [[x, y], [x, y]], got {_describe(value)}")
+        ends = np.array([self.point(p, join_key(path, k)) for k, p in enumerate(value)])
+        if np.linalg.norm(ends[1] - ends[0]) <= DISTANCE_TOLERANCE:
+            raise self.fail(path, "two distinct end points")
+        return ends
+
+    def geojson(
+        self, value: Any, path: str, origin: Origin
+    ) -> tuple[list[tuple[int, np.ndarray]], list[tuple[int, np.ndarray]]]:
+        """Footprints of a GeoJSON file -> (feature index, local ring) and (index, wall)."""
+        name = self.string(value, path, "a GeoJSON file path (relative to the mission file)")
+        file = self.source.parent / name
+        try:
+            doc = json.loads(file.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError) as exc:
+            reason = getattr(exc, "strerror", None) or type(exc).__name__
+            raise self.fail(path, f"a readable GeoJSON file: {name} ({reason})") from None
+        except json.JSONDecodeError as exc:
+            raise self.fail(
+                path, f"a GeoJSON file: {name} is not JSON (line {exc.lineno}, col {exc.colno})"
+            ) from None
+        features = self._features(doc, path, name)
+        polygons: list[tuple[int, np.ndarray]] = []
+        walls: list[tuple[int, np.ndarray]] = []
+        for k, geometry in features:
+            where = f"{name} features[{k}]"
+            kind = geometry.get("type") if isinstance(geometry, dict) else None
+            coords = geometry.get("coordinates") if isinstance(geometry, dict) else None
+            if kind == "Polygon":
+                rings = [self._lonlat_ring(coords, path, where)]
+            elif kind == "MultiPolygon" and isinstance(coords, list):
+                rings = [self._lonlat_ring(c, path, where) for c in coords]
+            elif kind == "LineString":
+                lines = [self._lonlat_line(coords, path, where)]
+            elif kind == "MultiLineString" and isinstance(coords, list):
+                lines = [self._lonlat_line(c, path, where) for c in coords]
+            else:
+                raise self.fail(
+                    path,
+                    f"Polygon, MultiPolygon, LineString or MultiLineString geometries "
+                    f"with coordinates ({where} is {kind if isinstance(kind, str) else _describe(kind)})",
+                )
+            if kind.endswith("Polygon"):
+                for ring in rings:
+                    local = lonlat_to_local(ring, origin)
+                    self._near_origin(local, path, where)
+                    shape = shapely.Polygon(local)
+                    if not shape.is_valid or shape.area <= DISTANCE_TOLERANCE:
+                        raise self.fail(
+                            path, f"simple footprints with non-zero area ({where} is not)"
+                        )
+                    polygons.append((k, local))
+            else:
+                for line in lines:
+                    local = lonlat_to_local(line, origin)
+                    self._near_origin(local, path, where)
+                    keep = np.r_[True, np.linalg.norm(np.diff(local, axis=0), axis=1) > 0]
+                    local = local[keep]
+                    walls.extend((k, seg) for seg in np.stack([local[:-1], local[1:]], axis=1))
+        if not polygons and not walls:
+            raise self.fail(path, f"at least one footprint in {name}, found none")
+        return polygons, walls
+
+    def _features(self, doc: Any, path: str, name: str) -> list[tuple[int, Any]]:
+        kind = doc.get("type") if isinstance(doc, dict) else None
+        if kind == "FeatureCollection" and isinstance(doc.get("features"), list):
+            features = doc["features"]
+        elif kind == "Feature":
+            features = [doc]
+        elif kind in ("Polygon", "MultiPolygon", "LineString", "MultiLineString"):
+            return [(0, doc)]
+        else:
+            raise self.fail(path, f"a GeoJSON FeatureCollection, Feature or geometry in {name}")
+        out = []
+        for k, feature in enumerate(features):
+            if not isinstance(feature, dict) or feature.get("type") != "Feature":
+                raise self.fail(path, f"GeoJSON features ({name} features[{k}] is not one)")
+            if feature.get("geometry") is not None:
+                out.append((k, feature["geometry"]))
+        return out
+
+    def _lonlat_positions(self, coords: Any, path: str, where: str) -> np.ndarray:
+        try:
+            array = np.array(
+                [p[:2] for p in coords if isinstance(p, list) and len(p) >= 2], dtype=float
+            )
+        except (TypeError, ValueError):
+            array = np.zeros((0, 2))
+        valid = (
+            isinstance(coords, list)
+            and array.shape == (len(coords), 2)
+            and all(_is_number(v) for p in coords for v in p[:2])
+            and np.isfinite(array).all()
+            and (np.abs(array[:, 0]) <= 180).all()
+            and (np.abs(array[:, 1]) <= 90).all()
+        )
+        if not valid:
+            raise self.fail(path, f"[longitude, latitude] positions in degrees ({where})")
+        return array
+
+    def _lonlat_ring(self, coords: Any, path: str, where: str) -> np.ndarray:
+        if not isinstance(coords, list) or not coords:
+            raise self.fail(path, f"a polygon's list of rings ({where})")
+        ring = self._lonlat_positions(coords[0], path, where)  # outer ring; holes ignored
+        if len(ring) < 4 or not np.array_equal(ring[0], ring[-1]):
+            raise self.fail(path, f"closed rings of at least 4 positions ({where})")
+        return ring[:-1]
+
+    def _lonlat_line(self, coords: Any, path: str, where: str) -> np.ndarray:
+        line = self._lonlat_positions(coords, path, where)
+        if len(line) < 2:
+            raise self.fail(path, f"lines of at least 2 positions ({where})")
+        return line
+
+    def _near_origin(self, local: np.ndarray, path: str, where: str) -> None:
+        if np.abs(local).max() > MAX_FOOTPRINT_DISTANCE_M:
+            raise self.fail(
+                path,
+                f"footprints within {MAX_FOOTPRINT_DISTANCE_M / 1000:g} km of origin "
+                f"({where} is {np.abs(local).max() / 1000:.0f} km away: is origin right?)",
+            )
+
+    def clear_of_obstacles(
+        self,
+        key: str,
+        pose: Pose,
+        obstacles: Obstacles,
+        keys: tuple[str, ...],
+        safety_margin: float,
+    ) -> None:
+        """A and B must lie outside every obstacle and its safety margin (DESIGN 3.2)."""
+        if len(obstacles) == 0:
+            return
+        point = shapely.Point(pose.x, pose.y)
+        hits = obstacles.tree.query(
+            point, predicate="dwithin", distance=safety_margin - DISTANCE_TOLERANCE
+        )
+        if len(hits):
+            geoms = obstacles.geometries[hits]
+            dist = shapely.distance(geoms, point)
+            worst = int(hits[int(np.argmin(dist))])
+            inside = float(dist.min()) == 0.0
+            got = "inside it" if inside else f"{_fmt(float(dist.min()))} m from it"
+            raise self.fail(
+                key,
+                f"a point at least safety_margin ({_fmt(safety_margin)} m) from every "
+                f"obstacle; it is {got}: {keys[worst]}",
+            )

@@ -1,0 +1,228 @@
+"""Run-time monitors: the guarantees' assumptions and the safety bounds, checked on the fly.
+
+Fatal (an event, and the run's exit status becomes 1):
+* a UAV's link is lost: no valid message for `link_timeout_s` of mission time;
+* a tracking error |position - V_n(t)| at or above rho_c: the guarantees assume less;
+* a UAV-UAV distance below 2 x `vehicle.radius` or a UAV-obstacle distance below
+  `vehicle.radius`: a collision.
+
+Warnings only (the plan reaches them by design): UAV-UAV below 2 rho_c, UAV-obstacle below
+rho_c. A condition is reported when it starts, not at every sample, and again only after it
+cleared. Distances are horizontal (CONTRACTS.md, run JSON); the sampled checks are the
+planner's (`planner.guarantees.check_positions`), so the run, the log report and the plan
+measure the same thing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planner.guarantees import check_positions
+from planner.obstacles import Obstacles
+
+
+@dataclass(frozen=True)
+class MonitorEvent:
+    """Something a monitor noticed, at mission time `t`."""
+
+    t: float
+    level: str  # "warning" | "error"
+    kind: str
+    text: str
+    uav: int | None = None
+    fatal: bool = False
+
+
+@dataclass
+class SafetyStats:
+    """Running extremes over the whole run."""
+
+    min_uav_uav_m: float = float("inf")
+    min_uav_obstacle_m: float = float("inf")
+    max_tracking_error_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    max_control_error_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    samples: int = 0
+    connected_samples: int = 0
+    last_connected: bool | None = None  # at the last sample with every UAV known
+
+    @property
+    def connected_fraction(self) -> float | None:
+        return self.connected_samples / self.samples if self.samples else None
+
+
+class SafetyMonitor:
+    """Tracking errors and distances from sampled positions (the paper's D_min, DESIGN 5)."""
+
+    def __init__(
+        self,
+        *,
+        fleet_size: int,
+        obstacles: Obstacles,
+        base_stations: np.ndarray,
+        radio_range: float,
+        safety_margin: float,
+        vehicle_radius: float,
+    ) -> None:
+        self.fleet_size = fleet_size
+        self.obstacles = obstacles
+        self.base_stations = np.asarray(base_stations, float).reshape(-1, 2)
+        self.radio_range = radio_range
+        self.safety_margin = safety_margin
+        self.vehicle_radius = vehicle_radius
+        self.stats = SafetyStats(
+            max_tracking_error_m=np.zeros(fleet_size),
+            max_control_error_m=np.zeros(fleet_size),
+        )
+        self._active: set[tuple] = set()
+
+    def tracking(
+        self, t: float, uavs: np.ndarray, errors: np.ndarray, control: np.ndarray
+    ) -> list[MonitorEvent]:
+        """Tracking errors |position - V_n| (and |position - reference|) of UAVs `uavs` (0-based)."""
+        stats = self.stats
+        np.maximum.at(stats.max_tracking_error_m, uavs, errors)
+        np.maximum.at(stats.max_control_error_m, uavs, control)
+        events = []
+        for index, error in zip(uavs.tolist(), errors.tolist(), strict=True):
+            events += self._condition(
+                ("tracking", index),
+                error >= self.safety_margin,
+                MonitorEvent(
+                    t,
+                    "error",
+                    "tracking",
+                    f"UAV {index + 1}: tracking error {error:.2f} m >= safety margin "
+                    f"{self.safety_margin:g} m (the guarantees no longer hold)",
+                    index + 1,
+                    fatal=True,
+                ),
+            )
+        return events
+
+    def positions(self, t: float, xy: np.ndarray) -> list[MonitorEvent]:
+        """Distances and connectivity of the fleet at one instant; `xy` (N, 2), NaN = unknown."""
+        known = np.isfinite(xy).all(axis=1)
+        if not known.any():
+            return []
+        ids = np.flatnonzero(known) + 1
+        sample = check_positions(
+            xy[known][None], self.obstacles, self.base_stations, self.radio_range
+        )
+        stats = self.stats
+        pair = float(sample.min_uav_uav_m[0])
+        obstacle = float(sample.min_uav_obstacle_m[0])
+        stats.min_uav_uav_m = min(stats.min_uav_uav_m, pair)
+        stats.min_uav_obstacle_m = min(stats.min_uav_obstacle_m, obstacle)
+        if known.all():
+            stats.samples += 1
+            stats.connected_samples += int(sample.connected[0])
+            stats.last_connected = bool(sample.connected[0])
+        events = []
+        rho, radius = self.safety_margin, self.vehicle_radius
+        if np.isfinite(pair):
+            who = self._closest_pair(xy[known], ids)
+            events += self._condition(
+                ("uav_collision",),
+                pair < 2 * radius,
+                MonitorEvent(
+                    t,
+                    "error",
+                    "collision_uav",
+                    f"UAVs {who}: {pair:.2f} m apart, below 2 x vehicle radius ({2 * radius:g} m)",
+                    fatal=True,
+                ),
+            )
+            events += self._condition(
+                ("uav_near",),
+                pair < 2 * rho,
+                MonitorEvent(
+                    t, "warning", "near_uav", f"UAVs {who}: {pair:.2f} m apart (< 2 rho_c)"
+                ),
+            )
+        if np.isfinite(obstacle):
+            events += self._condition(
+                ("obstacle_collision",),
+                obstacle < radius,
+                MonitorEvent(
+                    t,
+                    "error",
+                    "collision_obstacle",
+                    f"a UAV is {obstacle:.2f} m from an obstacle, below its radius ({radius:g} m)",
+                    fatal=True,
+                ),
+            )
+            events += self._condition(
+                ("obstacle_near",),
+                obstacle < rho,
+                MonitorEvent(
+                    t, "warning", "near_obstacle", f"a UAV is {obstacle:.2f} m from an obstacle"
+                ),
+            )
+        return events
+
+    def _condition(self, key: tuple, active: bool, event: MonitorEvent) -> list[MonitorEvent]:
+        """Report `event` when the condition starts; forget it when it clears."""
+        if active and key not in self._active:
+            self._active.add(key)
+            return [event]
+        if not active:
+            self._active.discard(key)
+        return []
+
+    @staticmethod
+    def _closest_pair(xy: np.ndarray, ids: np.ndarray) -> str:
+        gap = xy[:, None, :] - xy[None, :, :]
+        distance = np.hypot(gap[..., 0], gap[..., 1])
+        np.fill_diagonal(distance, np.inf)
+        i, j = np.unravel_index(np.argmin(distance), distance.shape)
+        return f"{ids[min(i, j)]} and {ids[max(i, j)]}"
+
+
+class LinkMonitor:
+    """Link loss (CONTRACTS.md: alive while any valid message arrives from the system id)."""
+
+    def __init__(self, fleet_size: int, link_timeout_s: float = 3.0) -> None:
+        self.link_timeout_s = link_timeout_s
+        self.lost = np.zeros(fleet_size, dtype=bool)
+        self.ever_lost = np.zeros(fleet_size, dtype=bool)
+        # silence (wall s) when a UAV was declared gone; lost until a newer message arrives
+        self._forced = np.full(fleet_size, np.inf)
+
+    def check(self, t: float, silent_s: np.ndarray, timeout_s: float) -> list[MonitorEvent]:
+        """`silent_s` (N,): seconds (wall) since each UAV's last valid message; `timeout_s` is
+        the link timeout on the same clock."""
+        events = []
+        self._forced[silent_s < self._forced] = np.inf  # a message arrived since
+        now_lost = (silent_s > timeout_s) | np.isfinite(self._forced)
+        for index in np.flatnonzero(now_lost & ~self.lost):
+            events.append(
+                MonitorEvent(
+                    t,
+                    "error",
+                    "link_lost",
+                    f"UAV {index + 1}: link lost (no valid message for {self.link_timeout_s:g} s)",
+                    int(index) + 1,
+                    fatal=True,
+                )
+            )
+        for index in np.flatnonzero(~now_lost & self.lost):
+            events.append(
+                MonitorEvent(
+                    t, "warning", "link_back", f"UAV {index + 1}: link back", int(index) + 1
+                )
+            )
+        self.ever_lost |= now_lost
+        self.lost = now_lost
+        return events
+
+    def mark_lost(self, t: float, index: int, why: str, silent_s: float) -> list[MonitorEvent]:
+        """A UAV known to be gone (its vehicle process exited) before its link times out;
+        `silent_s` is its current silence: it counts as lost until a newer message arrives."""
+        self._forced[index] = max(silent_s, 0.0)
+        if self.lost[index]:
+            return []
+        self.lost[index] = True
+        self.ever_lost[index] = True
+        return [MonitorEvent(t, "error", "link_lost", f"UAV {index + 1}: {why}", index + 1, True)]

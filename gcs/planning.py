@@ -1,0 +1,332 @@
+"""Mission -> MissionPlan: the planned path, the line formation, the speed profile, safe speed.
+
+The glue between the mission file and the pure planner. It also makes the refusals that need
+the plan (CONTRACTS.md), each naming its key: a fixed `fleet.size` below the minimum of eq. 28,
+a `leader` outside 1..N, a number of `fleet.connections` different from N, parking rows too
+close to an obstacle or to each other (eqs. 14-15), and a `speed.max` above the highest
+formation speed the path's bends allow (DESIGN 3.5) unless capping is asked for.
+
+Safe speed (DESIGN 3.5): the virtual targets turn corners instantly; a vehicle with
+acceleration limit `vehicle.max_acceleration` following a smoothed reference deviates at a bend
+by a smoothing error that grows with the speed. The error budget for that smoothing is
+`safety_margin - vehicle.tracking_allowance` (the allowance, by default 30 % of the margin, is
+kept for tracking error and navigation noise); `safe_speed_mps` is the highest speed whose
+smoothing error stays within it. Leader requests are planned as taking effect at their `at`
+(the run adds the relay lead time and records the profile it actually flew).
+
+Planning time is measured here (the planner itself has no clock).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+import shapely
+
+from gcs.errors import InputError
+from gcs.mission import Mission, SpeedSchedule
+from planner.formation import (
+    DISTANCE_TOLERANCE,
+    ParkingRows,
+    collision_spacing,
+    min_fleet_size,
+    parking_rows,
+)
+from planner.kinematics import (
+    LineFormation,
+    SpeedProfile,
+    recommended_window,
+    safe_speed,
+    smoothing_error_bound,
+)
+from planner.search import PathPlan, PathProblem, plan_path
+
+#: Tolerance when comparing a requested speed with the safe speed, m/s.
+SPEED_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class MissionPlan:
+    """Everything the GCS needs to fly a mission, and what `plan_json` reports.
+
+    `formation` is None when no valid path exists (`path_plan.reason` says why). `speeds` is
+    the schedule actually flown: the mission's, or capped to `safe_speed_mps` when asked.
+    """
+
+    mission: Mission
+    path_plan: PathPlan
+    formation: LineFormation | None
+    speeds: SpeedSchedule
+    profile: SpeedProfile
+    safe_speed_mps: float | None
+    speed_capped: bool
+    duration_s: float | None
+    error_budget_m: float
+    smoothing_window_s: float | None
+    smoothing_error_m: float | None
+    planning_time_s: float
+
+    @property
+    def valid(self) -> bool:
+        return bool(self.path_plan.valid)
+
+    @property
+    def reason(self) -> str | None:
+        return self.path_plan.reason
+
+    @property
+    def fleet_size(self) -> int:
+        return int(self.path_plan.fleet_size)
+
+
+def plan_mission(
+    mission: Mission,
+    *,
+    cap_speed: bool = False,
+    connections: tuple[str, ...] | None = None,
+    method: str = "exact",
+) -> MissionPlan:
+    """Plan `mission`; raise `InputError` for the plan-dependent refusals (exit 2).
+
+    `cap_speed` (or the mission's `speed.cap_to_safe`) caps every speed to the safe speed
+    instead of refusing; `connections` overrides `fleet.connections` (e.g. `--connect`).
+    A mission without a valid path is returned with `valid == False` and the reason.
+    """
+    conns = mission.fleet.connections if connections is None else tuple(connections)
+    conn_key = "fleet.connections" if connections is None else "--connect"
+    lower = min_fleet_size(
+        float(np.linalg.norm(mission.goal.xy - mission.start.xy)),
+        mission.safety_margin,
+        mission.radio_range,
+    )
+    fixed = mission.fleet.size
+    if fixed is not None:
+        _check_fleet_size(mission, fixed, lower, "the straight line A->B")
+        _check_fleet(mission, fixed, conns, conn_key)
+    first_rows = parking_rows(
+        mission.start.xy,
+        mission.goal.xy,
+        mission.start.theta_deg,
+        mission.goal.theta_deg,
+        fixed or lower,
+        mission.safety_margin,
+        mission.parking,
+    )
+    check_rows(mission, first_rows, fixed or lower)
+
+    problem = PathProblem(
+        start=mission.start.xy,
+        goal=mission.goal.xy,
+        start_angle_deg=mission.start.theta_deg,
+        goal_angle_deg=mission.goal.theta_deg,
+        safety_margin=mission.safety_margin,
+        radio_range=mission.radio_range,
+        obstacles=mission.obstacles,
+        parking=mission.parking,
+        fleet_size=fixed,
+        method=method,
+    )
+    began = time.perf_counter()
+    path_plan = plan_path(problem)
+    planning_time = time.perf_counter() - began
+
+    speeds = mission.speed
+    profile = _profile(speeds)
+    invalid = MissionPlan(
+        mission=mission,
+        path_plan=path_plan,
+        formation=None,
+        speeds=speeds,
+        profile=profile,
+        safe_speed_mps=None,
+        speed_capped=False,
+        duration_s=None,
+        error_budget_m=mission.error_budget,
+        smoothing_window_s=None,
+        smoothing_error_m=None,
+        planning_time_s=planning_time,
+    )
+    if path_plan.rows is not None:
+        check_rows(mission, path_plan.rows, int(path_plan.fleet_size))
+    if not path_plan.valid:
+        return invalid
+
+    size = int(path_plan.fleet_size)
+    if fixed is not None:
+        _check_fleet_size(mission, fixed, int(path_plan.min_fleet_size), "the planned path")
+    _check_fleet(mission, size, conns, conn_key)
+
+    formation = LineFormation(
+        path=path_plan.path,
+        fleet_size=size,
+        safety_margin=mission.safety_margin,
+        radio_range=mission.radio_range,
+        rows=path_plan.rows,
+    )
+    safe = float(safe_speed(formation, mission.vehicle.max_acceleration, mission.error_budget))
+    capped = False
+    if speeds.max > safe + SPEED_TOLERANCE:
+        if not (cap_speed or speeds.cap_to_safe):
+            raise InputError(
+                mission.source,
+                "speed.max",
+                f"at most the safe formation speed {safe:.3g} m/s that the path's bends allow "
+                f"with vehicle.max_acceleration {mission.vehicle.max_acceleration:g} m/s^2 and "
+                f"a smoothing budget of {mission.error_budget:.3g} m (DESIGN 3.5), got "
+                f"{speeds.max:g}; lower it, raise vehicle.max_acceleration, or set "
+                "speed.cap_to_safe: true (--cap-speed)",
+            )
+        speeds = _cap(speeds, safe)
+        capped = True
+        profile = _profile(speeds)
+    duration = float(formation.duration(profile))
+    window = float(recommended_window(speeds.max, mission.vehicle.max_acceleration, formation))
+    smoothing = float(smoothing_error_bound(formation, profile, window))
+    return replace(
+        invalid,
+        formation=formation,
+        speeds=speeds,
+        profile=profile,
+        safe_speed_mps=safe,
+        speed_capped=capped,
+        duration_s=duration,
+        smoothing_window_s=window,
+        smoothing_error_m=smoothing,
+    )
+
+
+def check_rows(mission: Mission, rows: ParkingRows, fleet_size: int) -> None:
+    """Eqs. 14-15: each row >= rho_c from every obstacle, the two rows >= 2 rho_c apart."""
+    rho = mission.safety_margin
+    obstacles = mission.obstacles
+    length = (fleet_size - 1) * collision_spacing(rho) + rho
+    lines = {
+        "start": shapely.LineString(rows.start_row),
+        "goal": shapely.LineString(rows.goal_row),
+    }
+    where = {"start": "behind start", "goal": "beyond goal"}
+    size = "" if mission.parking == "ray" else f", {length:.4g} m for {fleet_size} UAVs"
+    for key, line in lines.items():
+        if len(obstacles) == 0:
+            break
+        hits = obstacles.tree.query(line, predicate="dwithin", distance=rho - DISTANCE_TOLERANCE)
+        if len(hits):
+            dist = shapely.distance(obstacles.geometries[hits], line)
+            worst = int(hits[int(np.argmin(dist))])
+            raise InputError(
+                mission.source,
+                f"{key}.theta_deg",
+                f"a parking row ({where[key]}{size}) at least safety_margin = {rho:g} m from "
+                f"every obstacle (eq. 14); {mission.obstacle_keys[worst]} is "
+                f"{float(dist.min()):.3g} m from it",
+            )
+    gap = float(shapely.distance(lines["start"], lines["goal"]))
+    if gap < 2 * rho - DISTANCE_TOLERANCE:
+        raise InputError(
+            mission.source,
+            "goal.theta_deg",
+            f"parking rows at least 2 x safety_margin = {2 * rho:g} m apart (eq. 15); the rows "
+            f"behind start and beyond goal{size} are {gap:.3g} m apart",
+        )
+
+
+def plan_json(plan: MissionPlan) -> dict[str, Any]:
+    """The plan JSON of CONTRACTS.md (full precision), plus diagnostics; strict JSON values."""
+    pp = plan.path_plan
+    mission = plan.mission
+    rows = pp.rows
+    out: dict[str, Any] = {
+        "name": mission.name,
+        "valid": plan.valid,
+        "reason": plan.reason,
+        "path": _points(pp.path),
+        "length_m": _number(pp.length_m),
+        "fleet_size": _integer(pp.fleet_size),
+        "min_fleet_size": _integer(pp.min_fleet_size),
+        "duration_s": _number(plan.duration_s),
+        "safe_speed_mps": _number(plan.safe_speed_mps),
+        "max_speed_mps": _number(plan.speeds.max),
+        "speed_capped": plan.speed_capped,
+        "parking_rows": {
+            "A": _points(rows.start_row) if rows is not None else [],
+            "B": _points(rows.goal_row) if rows is not None else [],
+        },
+        "parking_slots": {
+            "A": _points(plan.formation.start_slots) if plan.formation else [],
+            "B": _points(plan.formation.goal_slots) if plan.formation else [],
+        },
+        "iterations": _integer(pp.iterations),
+        "expansions": _integer(pp.expansions),
+        "node_count": _integer(pp.node_count),
+        "edges_examined": _integer(pp.edges_examined),
+        "planning_time_s": plan.planning_time_s,
+        "error_budget_m": plan.error_budget_m,
+        "smoothing_window_s": _number(plan.smoothing_window_s),
+        "smoothing_error_m": _number(plan.smoothing_error_m),
+        "speed_changes": [
+            {"at": c.at, "speed": c.speed, "leader": c.leader} for c in plan.speeds.changes
+        ],
+        "initial_speed_mps": plan.speeds.initial,
+        "safety_margin_m": mission.safety_margin,
+        "radio_range_m": mission.radio_range,
+        "altitude_m": mission.altitude,
+        "origin": {"lat": mission.origin.lat, "lon": mission.origin.lon, "alt": mission.origin.alt},
+    }
+    return out
+
+
+def _profile(speeds: SpeedSchedule) -> SpeedProfile:
+    return SpeedProfile.from_changes(speeds.initial, [(c.at, c.speed) for c in speeds.changes])
+
+
+def _cap(speeds: SpeedSchedule, limit: float) -> SpeedSchedule:
+    changes = tuple(replace(c, speed=min(c.speed, limit)) for c in speeds.changes)
+    return replace(speeds, max=limit, initial=min(speeds.initial, limit), changes=changes)
+
+
+def _check_fleet_size(mission: Mission, fixed: int, minimum: int, what: str) -> None:
+    if fixed < minimum:
+        raise InputError(
+            mission.source,
+            "fleet.size",
+            f"auto or at least {minimum} UAVs, the minimum of eq. 28 for {what}, got {fixed}",
+        )
+
+
+def _check_fleet(mission: Mission, size: int, conns: tuple[str, ...], conn_key: str) -> None:
+    for i, change in enumerate(mission.speed.changes):
+        if change.leader is not None and change.leader > size:
+            raise InputError(
+                mission.source,
+                f"speed.changes[{i}].leader",
+                f"a UAV number in 1..{size} (the fleet size), got {change.leader}",
+            )
+    needs = mission.fleet.backend != "sim" or len(conns) > 0
+    if needs and len(conns) != size:
+        raise InputError(
+            mission.source if conn_key == "fleet.connections" else None,
+            conn_key,
+            f"one MAVLink connection string per UAV ({size} for backend "
+            f"{mission.fleet.backend}), got {len(conns)}",
+        )
+
+
+def _points(array: Any) -> list[list[float]]:
+    if array is None:
+        return []
+    return [[float(x), float(y)] for x, y in np.asarray(array, float).reshape(-1, 2)]
+
+
+def _number(value: Any) -> float | None:
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _integer(value: Any) -> int | None:
+    return None if value is None else int(value)

@@ -1,0 +1,1015 @@
+"""Flying a planned mission: the mission clock and the ONE scheduler loop of the whole fleet.
+
+The loop waits on every UAV link at once (`selectors`) until the next tick, hands what arrived
+to the drivers, and at each tick (the mission's setpoint rate in mission time):
+
+1. turns speed requests (schedule, operator, leader, Ctrl-C, link loss) into time-stamped
+   changes of the formation's speed profile, broadcast to every UAV (DESIGN 4);
+2. takes each UAV off when its departure Phi(L_0,n) approaches (minus the take-off lead),
+   lands it when it sits on its arrival slot after Phi(L_{K+1},n);
+3. streams one setpoint per UAV in flight, from the smoothed reference of V_n(t) (position,
+   velocity, acceleration; DESIGN 3.5), converted for the whole fleet at once;
+4. steps the drivers (handshakes, retransmissions), runs the monitors, records.
+
+There is no other thread: if this loop stalls, the setpoints stop and the vehicles' own
+failsafes see it. Mission time 0 is when the formation starts moving; the clock is anchored
+once every UAV is ready, so that UAV 1 (which leaves at t = 0) takes off at -lead. With
+`speedup` K the mission clock runs K times faster than the wall clock; every wall delay keeps
+a floor (`DriverTiming`).
+
+A UAV that is not airborne shortly before its departure freezes the formation (speed 0) until
+it is: the virtual targets never leave a UAV behind. A lost link freezes the formation too;
+then either the operator decides (interactive) or, after `link_wait_s`, everyone lands where
+it is and the run ends with exit status 1. Ctrl-C once freezes, twice lands everyone.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import selectors
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from gcs.drivers.base import Driver, DriverEvent, Fleet, Phase
+from gcs.geodesy import enu_to_geodetic
+from gcs.link import mavutil
+from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
+from gcs.speed import (
+    OperatorSocket,
+    ScheduledChange,
+    SpeedChange,
+    SpeedChanges,
+    SpeedRecord,
+    SpeedRefused,
+)
+from planner.kinematics import (
+    SpeedProfile,
+    recommended_window,
+    smoothed_reference,
+    smoothing_error_bound,
+)
+
+log = logging.getLogger(__name__)
+mavlink = mavutil.mavlink
+
+_SEVERITY_LEVEL = {
+    mavlink.MAV_SEVERITY_EMERGENCY: "fatal",
+    mavlink.MAV_SEVERITY_ALERT: "error",
+    mavlink.MAV_SEVERITY_CRITICAL: "error",
+    mavlink.MAV_SEVERITY_ERROR: "error",
+    mavlink.MAV_SEVERITY_WARNING: "warning",
+    mavlink.MAV_SEVERITY_NOTICE: "info",
+    mavlink.MAV_SEVERITY_INFO: "info",
+    mavlink.MAV_SEVERITY_DEBUG: "debug",
+}
+
+
+#: Mission seconds a position sample may be carried forward by its velocity (distances).
+MAX_EXTRAPOLATION_S = 1.0
+
+
+class MissionClock:
+    """Mission time from the wall clock: `mission = (wall - wall_at_zero) * speedup`.
+
+    Anchored once (`anchor`); `log_time_ns` is the Unix time (ns) at mission time 0 plus the
+    mission time, the recording's time base (CONTRACTS.md, MCAP).
+    """
+
+    def __init__(
+        self,
+        speedup: float = 1.0,
+        monotonic: Callable[[], float] = time.monotonic,
+        unix_ns: Callable[[], int] = time.time_ns,
+    ) -> None:
+        self.speedup = float(speedup)
+        self._monotonic = monotonic
+        self._unix_ns = unix_ns
+        self._zero_wall: float | None = None
+        self.epoch_ns: int | None = None  # Unix ns at mission time 0
+
+    @property
+    def anchored(self) -> bool:
+        return self._zero_wall is not None
+
+    def anchor(self, wall: float, mission_time: float) -> None:
+        """Fix the clock so that `mission_time(wall) == mission_time`."""
+        self._zero_wall = wall - mission_time / self.speedup
+        offset_ns = self._unix_ns() - int(self._monotonic() * 1e9)
+        self.epoch_ns = offset_ns + int(self._zero_wall * 1e9)
+
+    def mission_time(self, wall: float) -> float:
+        return (wall - self._zero_wall) * self.speedup
+
+    def wall_at(self, mission_time: float) -> float:
+        return self._zero_wall + mission_time / self.speedup
+
+    def log_time_ns(self, wall: float) -> int:
+        return self.epoch_ns + int(round(self.mission_time(wall) * 1e9))
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How to fly (command-line options of `gcs mission run`)."""
+
+    speedup: float = 1.0
+    setpoint_rate_hz: float = 10.0  # mission time
+    link_timeout_s: float = 3.0  # mission time without a valid message = link lost
+    link_wall_floor_s: float = 1.0  # ... but never less than this on the wall clock
+    link_wait_s: float = 10.0  # mission time to wait for a lost link before landing everyone
+    interactive: bool = False  # a terminal operator decides after a link loss
+    takeoff_lead_s: float | None = None  # mission time before departure; None: from the climb
+    climb_rate_mps: float = 2.5  # assumed for the automatic take-off lead
+    landing_tolerance_m: float = 1.0  # over its arrival slot within this -> land
+    landing_settle_s: float = 10.0  # land anyway this long after the target stopped
+    connect_timeout_s: float = 60.0  # wall: every UAV ready within this
+    finish_timeout_s: float = 120.0  # mission time for the landings after an abort
+    metrics_period_s: float = 0.1  # mission time between /metrics records
+
+
+@dataclass
+class UavTrack:
+    """What the runtime keeps per UAV."""
+
+    takeoff_sent: bool = False
+    land_sent: bool = False
+    takeoff_time: float | None = None  # mission time take-off started
+    landed_time: float | None = None
+    last_position: np.ndarray | None = None  # (3,) ENU
+    last_velocity: np.ndarray | None = None
+    last_sample_time: float | None = None  # mission time of the last position
+    final_xy: np.ndarray | None = None
+
+
+@dataclass
+class RunResult:
+    """Everything the summary reports."""
+
+    completed: bool
+    reason: str | None
+    fleet_size: int
+    duration_s: float | None
+    min_uav_uav_m: float | None
+    min_uav_obstacle_m: float | None
+    max_tracking_error_m: float | None
+    tracking_error_m: list[float | None]
+    control_error_m: list[float | None]
+    landing_error_m: list[float | None]
+    connected_fraction: float | None
+    speed_changes: list[dict]
+    events: list[MonitorEvent]
+    phases: list[str]
+    smoothing_window_s: float
+    smoothing_error_m: float
+    noise_m: float | None
+    setpoints_sent: int
+    setpoint_rate_hz: float | None
+    setpoint_jitter_p99_ms: float | None
+    setpoint_period_ms: float
+    setpoint_max_gap_ms: float | None
+    ticks: int
+    interrupted: int
+    fatal: bool
+
+
+class VehicleClock:
+    """Maps one vehicle's clock (time_boot_ms) to mission time, so that samples keep the time
+    they were taken even when the ground station read them late (a busy machine, a stall).
+
+    offset = min over recent samples of (mission time at receipt - vehicle time): the least
+    delayed sample bounds the offset best. Both clocks run at the same speedup. A vehicle clock
+    that goes backwards (a reboot) starts the estimate over.
+    """
+
+    def __init__(self, window: int = 50) -> None:
+        self._offsets: deque[float] = deque(maxlen=window)
+        self._last: float | None = None
+
+    def mission_time(self, vehicle_s: float | None, received_s: float) -> float:
+        if vehicle_s is None:
+            return received_s
+        if self._last is not None and vehicle_s < self._last:
+            self._offsets.clear()
+        self._last = vehicle_s
+        self._offsets.append(received_s - vehicle_s)
+        return min(vehicle_s + min(self._offsets), received_s)
+
+
+class View(Protocol):
+    """The live view (or nothing): shown while flying, and a source of operator commands."""
+
+    def update(self, run: MissionRun, now: float) -> None: ...
+
+    def commands(self) -> list[str]: ...
+
+    def message(self, level: str, text: str) -> None: ...
+
+
+class _NoView:
+    def update(self, run: MissionRun, now: float) -> None:
+        return None
+
+    def commands(self) -> list[str]:
+        return []
+
+    def message(self, level: str, text: str) -> None:
+        return None
+
+
+class Recorder(Protocol):
+    """What the runtime records (gcs.recording.FlightRecorder implements it)."""
+
+    def setpoint(self, uav: int, payload: dict, wall: float) -> None: ...
+
+    def state(self, uav: int, payload: dict, wall: float) -> None: ...
+
+    def fix(self, uav: int, lat: float, lon: float, alt: float, wall: float) -> None: ...
+
+    def speed(self, payload: dict, wall: float) -> None: ...
+
+    def metrics(self, payload: dict, wall: float) -> None: ...
+
+    def event(self, level: str, message: str, wall: float, name: str = "gcs") -> None: ...
+
+
+class MissionRun:
+    """One flight of a planned mission (see the module docstring)."""
+
+    def __init__(
+        self,
+        plan,
+        drivers: list[Driver],
+        clock: MissionClock,
+        recorder: Recorder,
+        options: RunOptions,
+        *,
+        fleet: Fleet | None = None,
+        operator: OperatorSocket | None = None,
+        view: View | None = None,
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
+        mission = plan.mission
+        self.plan = plan
+        self.mission = mission
+        self.formation = plan.formation
+        self.drivers = drivers
+        self.clock = clock
+        self.recorder = recorder
+        self.options = options
+        self.fleet = fleet
+        self.operator = operator
+        self.view = view or _NoView()
+        self._monotonic = monotonic
+        size = self.formation.fleet_size
+        self.size = size
+        self.tracks = [UavTrack() for _ in range(size)]
+        self._vehicle_clocks = [VehicleClock() for _ in range(size)]
+        self.altitude = mission.altitude
+        a_max = mission.vehicle.max_acceleration
+        self.window_s = float(recommended_window(plan.speeds.max, a_max, self.formation))
+        # The profile starts with the initial speed; every change (scheduled ones included) is
+        # added when it is broadcast, always ahead of its effective time.
+        self.profile = SpeedProfile.constant(plan.speeds.initial)
+        schedule = [ScheduledChange(c.at, c.speed, c.leader) for c in plan.speeds.changes]
+        self.speeds = SpeedChanges(
+            max_speed=plan.speeds.max, window_s=self.window_s, schedule=schedule
+        )
+        self._records: list[SpeedRecord] = []
+        stations = [mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations]
+        self.safety = SafetyMonitor(
+            fleet_size=size,
+            obstacles=mission.obstacles,
+            base_stations=np.array(stations),
+            radio_range=mission.radio_range,
+            safety_margin=mission.safety_margin,
+            vehicle_radius=mission.vehicle.radius,
+        )
+        self.links = LinkMonitor(size, options.link_timeout_s)
+        self.events: list[MonitorEvent] = []
+        self.fatal = False
+        self.reason: str | None = None
+        self.aborting = False
+        self.frozen_by: str | None = None  # "link" | "operator" | "takeoff" | None
+        self._resume_speed: float | None = None
+        self._link_deadline: float | None = None
+        self.interrupts = 0
+        self._handled_interrupts = 0
+        self._samples: list[tuple[int, float, np.ndarray]] = []
+        self._tick_walls: list[float] = []
+        self.tick_work: list[float] = []  # wall seconds each flight tick took
+        self._last_metrics: float | None = None
+        self._last_view = -math.inf
+        self._abort_time: float | None = None
+        self.ticks = 0
+        self.current_speed = plan.speeds.initial
+        self.tracking_now = np.full(size, np.nan)
+        self.mission_time = None
+
+    # ------------------------------------------------------------------ public
+    @property
+    def tick_period_wall(self) -> float:
+        return 1.0 / (self.options.setpoint_rate_hz * self.options.speedup)
+
+    def takeoff_lead_s(self) -> float:
+        """Mission seconds between take-off and departure: arming, climb, margin."""
+        if self.options.takeoff_lead_s is not None:
+            return self.options.takeoff_lead_s
+        climb = self.altitude / self.options.climb_rate_mps
+        return 5.0 + 1.5 * climb
+
+    def smoothing_bound(self) -> float:
+        """Bound of |smoothed reference - V_n| for the profile flown so far (DESIGN 3.5)."""
+        return float(smoothing_error_bound(self.formation, self.profile, self.window_s))
+
+    def interrupt(self) -> None:
+        """Ctrl-C (from a signal handler: only counts; the loop acts on it)."""
+        self.interrupts += 1
+
+    def run(self) -> RunResult:
+        """Connect, fly, land; return the result. The caller owns links, fleet and recorder."""
+        selector = self._selector()
+        try:
+            if self._connect(selector):
+                self._fly(selector)
+        finally:
+            selector.close()
+        return self._result()
+
+    def request_speed(self, speed: float, source: str, at: float | None = None) -> SpeedChange:
+        """A speed change from the operator or the runtime; raises `SpeedRefused`."""
+        now = self._monotonic()
+        t = self.clock.mission_time(now) if self.clock.anchored else 0.0
+        change = self.speeds.request(speed, t, source, at)
+        self._apply(change, now)
+        return change
+
+    def land_everyone(self, reason: str) -> None:
+        """Abort: every UAV lands where it is; the run ends with exit status 1."""
+        if self.aborting:
+            return
+        self.aborting = True
+        self.reason = self.reason or reason
+        now = self._monotonic()
+        self._abort_time = self.clock.mission_time(now) if self.clock.anchored else 0.0
+        self._event(
+            MonitorEvent(self._abort_time, "error", "abort", f"landing everyone: {reason}"), now
+        )
+        for driver in self.drivers:
+            driver.land(now)
+
+    # ------------------------------------------------------------------ phases
+    def _connect(self, selector) -> bool:
+        """Step the handshakes until every UAV is ready; anchor the mission clock."""
+        began = self._monotonic()
+        period = 0.02
+        while True:
+            now = self._monotonic()
+            self._receive(selector, period)
+            now = self._monotonic()
+            for driver in self.drivers:
+                driver.step(now)
+            self._drain_driver_events(now)
+            self._poll_fleet(now)
+            self.view.update(self, now)
+            if self.interrupts:
+                self.reason = "interrupted while connecting"
+                return False
+            failed = [d for d in self.drivers if d.phase == Phase.FAILED]
+            if failed:
+                self.reason = f"UAV {failed[0].uav_id}: {failed[0].failure_reason}"
+                self.fatal = True
+                return False
+            if self.aborting:
+                return False
+            if all(d.phase == Phase.READY for d in self.drivers):
+                break
+            if now - began > self.options.connect_timeout_s:
+                waiting = [d for d in self.drivers if d.phase != Phase.READY]
+                self.reason = (
+                    f"UAV {waiting[0].uav_id} not ready after "
+                    f"{self.options.connect_timeout_s:g} s ({waiting[0].phase.value})"
+                )
+                self.fatal = True
+                return False
+        now = self._monotonic()
+        self.clock.anchor(now, -self.takeoff_lead_s())
+        bound, budget = self.smoothing_bound(), self.mission.error_budget
+        if bound > budget:
+            self._event(
+                MonitorEvent(
+                    -self.takeoff_lead_s(),
+                    "warning",
+                    "smoothing_budget",
+                    f"smoothing error bound {bound:.2f} m exceeds its budget {budget:.2f} m",
+                ),
+                now,
+            )
+        for driver in self.drivers:
+            driver.set_mission_clock(self.clock.mission_time)
+            driver.step(now)
+        return True
+
+    def fly(self, until: Callable[[float], bool] | None = None) -> None:
+        """The flight loop alone, on an anchored clock (benchmarks): tick until every UAV has
+        landed or `until(wall)` says stop."""
+        selector = self._selector()
+        try:
+            self._fly(selector, until)
+        finally:
+            selector.close()
+
+    def _selector(self) -> selectors.BaseSelector:
+        """select(2) wakes up to the microsecond (epoll and poll round to milliseconds, which is
+        a millisecond of setpoint jitter); epoll beyond select's descriptor limit."""
+        if len(self.drivers) < 500:
+            selector = selectors.SelectSelector()
+        else:  # pragma: no cover - very large fleets
+            selector = selectors.DefaultSelector()
+        for index, driver in enumerate(self.drivers):
+            selector.register(driver.link.fileno(), selectors.EVENT_READ, index)
+        return selector
+
+    def _fly(self, selector, until: Callable[[float], bool] | None = None) -> None:
+        period = self.tick_period_wall
+        next_tick = self._monotonic()
+        while True:
+            now = self._monotonic()
+            self._receive(selector, max(0.0, next_tick - now))
+            now = self._monotonic()
+            if now < next_tick:
+                continue
+            self._tick(now)
+            self.tick_work.append(self._monotonic() - now)
+            next_tick += period
+            if next_tick < now:  # overrun: do not burst to catch up
+                next_tick = now + period
+            if self._finished(now) or (until is not None and until(now)):
+                return
+
+    def _receive(self, selector, timeout: float) -> None:
+        for key, _ in selector.select(timeout):
+            index = key.data
+            driver = self.drivers[index]
+            now = self._monotonic()
+            for msg in driver.link.receive(now):
+                driver.on_message(msg, now)
+                kind = msg.get_type()
+                if kind == "GLOBAL_POSITION_INT":
+                    self._on_reported_position(driver, msg, now)
+                if kind == "SIM_STATE" or (
+                    kind == "GLOBAL_POSITION_INT" and driver.telemetry.true_time is None
+                ):
+                    self._on_position(index, driver, kind == "SIM_STATE", now)
+
+    # ------------------------------------------------------------------ the tick
+    def _tick(self, now: float) -> None:
+        self.ticks += 1
+        t = self.clock.mission_time(now)
+        self.mission_time = t
+        self._handle_interrupts(now)
+        self._handle_requests(t, now)
+        self._schedule_uavs(t, now)
+        self._stream(t, now)
+        for driver in self.drivers:
+            driver.step(now)
+        self._collect_acks(now)
+        self._drain_driver_events(now)
+        self._poll_fleet(now)
+        self._monitor(t, now)
+        self._link_policy(t, now)
+        if now - self._last_view >= 0.2:
+            self._last_view = now
+            self.view.update(self, now)
+
+    def _handle_interrupts(self, now: float) -> None:
+        while self._handled_interrupts < self.interrupts:
+            self._handled_interrupts += 1
+            t = self.clock.mission_time(now)
+            if self._handled_interrupts == 1:
+                self._event(
+                    MonitorEvent(
+                        t,
+                        "warning",
+                        "interrupt",
+                        "Ctrl-C: freezing the formation (Ctrl-C again: land everyone)",
+                    ),
+                    now,
+                )
+                self.reason = "interrupted by the operator"
+                self._freeze("operator", now)
+            else:
+                self.land_everyone("interrupted by the operator (Ctrl-C twice)")
+
+    def _handle_requests(self, t: float, now: float) -> None:
+        if self.aborting:
+            return
+        for scheduled in self.speeds.due(t):
+            self._issue(
+                scheduled.speed, t, "schedule", now, at=max(scheduled.at, self.speeds.earliest(t))
+            )
+        for driver in self.drivers:
+            for request in driver.drain_leader_requests():
+                self._issue(request.speed, t, f"leader:{request.uav_id}", now)
+        if self.operator is not None:
+            for request in self.operator.poll():
+                if request.error:
+                    request.reply({"ok": False, "reason": request.error})
+                    continue
+                try:
+                    change = self.speeds.request(request.speed, t, "operator", request.at)
+                except SpeedRefused as refused:
+                    request.reply({"ok": False, "reason": str(refused)})
+                    continue
+                self._apply(change, now)
+                request.reply(
+                    {
+                        "ok": True,
+                        "seq": change.seq,
+                        "effective_s": change.effective_s,
+                        "speed": change.speed,
+                    }
+                )
+        for line in self.view.commands():
+            self._operator_command(line, t, now)
+
+    def _operator_command(self, line: str, t: float, now: float) -> None:
+        words = line.strip().lower().split()
+        if not words:
+            return
+        if words[0] == "land":
+            self.land_everyone("the operator asked everyone to land")
+            return
+        try:
+            speed = float(words[0])
+            at = float(words[1].lstrip("@")) if len(words) > 1 else None
+        except ValueError:
+            self.view.message(
+                "warning", f"type a speed (m/s) [@T], or 'land'; not {line.strip()!r}"
+            )
+            return
+        try:
+            change = self.speeds.request(speed, t, "operator", at)
+        except SpeedRefused as refused:
+            self.view.message("warning", str(refused))
+            return
+        self._apply(change, now)
+
+    def _issue(self, speed: float, t: float, source: str, now: float, at: float | None = None):
+        try:
+            change = self.speeds.request(speed, t, source, at)
+        except SpeedRefused as refused:
+            self._event(MonitorEvent(t, "warning", "speed_refused", f"{source}: {refused}"), now)
+            return None
+        self._apply(change, now)
+        return change
+
+    def _apply(self, change: SpeedChange, now: float) -> None:
+        """The formation takes the change at its effective time; broadcast it to every UAV."""
+        self.profile = self.profile.with_change(change.effective_s, change.speed)
+        record = self.speeds.record(change, now)
+        for driver in self.drivers:
+            if driver.phase not in (Phase.CONNECTING, Phase.FAILED):
+                driver.send_speed_change(change, now)
+        payload = {
+            "t": change.requested_s,
+            "kind": "request",
+            "seq": change.seq,
+            "effective_s": change.effective_s,
+            "speed": change.speed,
+            "source": change.source,
+        }
+        self.recorder.speed(payload, now)
+        text = (
+            f"speed change {change.seq}: {change.speed:g} m/s at t={change.effective_s:.2f} s "
+            f"({change.source})"
+        )
+        self.recorder.event("info", text, now)
+        log.info("%s", text)
+        self._records.append(record)
+        if change.source == "operator" and change.speed > 0 and self.frozen_by is not None:
+            self.frozen_by = None  # the operator decided
+            self._link_deadline = None
+
+    def _freeze(self, why: str, now: float) -> None:
+        """Speed 0 at the earliest effective time (the formation holds its shape)."""
+        if self.frozen_by is not None or self.aborting:
+            self.frozen_by = self.frozen_by or why
+            return
+        t = self.clock.mission_time(now)
+        self._resume_speed = float(self.profile.speed_at(self.speeds.earliest(t)))
+        self.frozen_by = why
+        self._issue(0.0, t, "freeze", now)
+
+    def _resume(self, now: float) -> None:
+        t = self.clock.mission_time(now)
+        speed = self._resume_speed if self._resume_speed else self.plan.speeds.initial
+        self.frozen_by = None
+        self._issue(speed, t, "resume", now)
+
+    def _schedule_uavs(self, t: float, now: float) -> None:
+        formation = self.formation
+        departures = self.profile.time_at_distance(formation.departure_distance)
+        arrivals = self.profile.time_at_distance(formation.arrival_distance)
+        lead = self.takeoff_lead_s()
+        horizon = t + self.speeds.lead_s + 2 * self.tick_period_wall * self.options.speedup
+        late = []
+        for index, driver in enumerate(self.drivers):
+            track = self.tracks[index]
+            if self.aborting:
+                break
+            if not track.takeoff_sent and t >= departures[index] - lead:
+                track.takeoff_sent = True
+                track.takeoff_time = t
+                driver.takeoff(self.altitude, now)
+            not_up = driver.phase in (Phase.READY, Phase.ARMING, Phase.TAKING_OFF)
+            if not_up and departures[index] <= horizon:
+                late.append(driver.uav_id)
+            if (
+                driver.phase == Phase.FOLLOWING
+                and not track.land_sent
+                and t >= arrivals[index] + self.window_s / 2
+            ):
+                offset = self._slot_offset(index, t)
+                if (
+                    offset <= self.options.landing_tolerance_m
+                    or t >= arrivals[index] + self.window_s / 2 + self.options.landing_settle_s
+                ):
+                    track.land_sent = True
+                    driver.land(now)
+        if late and self.frozen_by is None:
+            self._event(
+                MonitorEvent(
+                    t,
+                    "warning",
+                    "late_takeoff",
+                    f"waiting for UAV {', '.join(map(str, late))} to take off: formation frozen",
+                ),
+                now,
+            )
+            self._freeze("takeoff", now)
+        elif not late and self.frozen_by == "takeoff":
+            self._resume(now)
+
+    def _slot_offset(self, index: int, t: float) -> float:
+        track = self.tracks[index]
+        if track.last_position is None:
+            return math.inf
+        slot = self.formation.goal_slots[index]
+        return float(np.hypot(*(track.last_position[:2] - slot)))
+
+    def _stream(self, t: float, now: float) -> None:
+        streaming = [
+            i for i, d in enumerate(self.drivers) if d.wants_setpoints and not self.aborting
+        ]
+        if not streaming:
+            return
+        self._tick_walls.append(now)
+        reference = smoothed_reference(self.formation, self.profile, [t], self.window_s)
+        idx = np.array(streaming)
+        xy = reference.positions[0, idx]
+        vxy = reference.velocities[0, idx]
+        axy = reference.accelerations[0, idx]
+        count = len(idx)
+        up = np.full(count, float(self.altitude))
+        geodetic = enu_to_geodetic(xy[:, 0], xy[:, 1], up, self.mission.origin).reshape(count, 3)
+        virtual = self.formation.positions(self.profile.distance(t))[idx]
+        speed = float(self.profile.speed_at(t))
+        distance = float(self.profile.distance(t))
+        self.current_speed = float(self.profile.speed_at(max(t, 0.0)))  # commanded, for the view
+        zero = np.zeros(count)
+        position = np.column_stack([xy, up])
+        velocity = np.column_stack([vxy, zero])
+        acceleration = np.column_stack([axy, zero])
+        # Python lists once per tick: the per-UAV loop below is the hot path.
+        positions, velocities = position.tolist(), velocity.tolist()
+        accelerations, virtuals, geo = acceleration.tolist(), virtual.tolist(), geodetic.tolist()
+        for k, index in enumerate(streaming):
+            driver = self.drivers[index]
+            driver.send_setpoint(positions[k], velocities[k], accelerations[k], t, now, geo[k])
+            lat, lon, alt = geo[k]
+            self.recorder.setpoint(
+                driver.uav_id,
+                {
+                    "t": t,
+                    "uav": driver.uav_id,
+                    "position": positions[k],
+                    "velocity": velocities[k],
+                    "acceleration": accelerations[k],
+                    "virtual_target": virtuals[k],
+                    "formation_speed": speed,
+                    "distance": distance,
+                    "latitude": lat,
+                    "longitude": lon,
+                    "relative_altitude": alt - driver.home_altitude_amsl,
+                },
+                now,
+            )
+
+    def _on_reported_position(self, driver: Driver, msg, now: float) -> None:
+        """A position the vehicle reports (with its navigation noise): the Map panel's fix."""
+        self.recorder.fix(driver.uav_id, msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, now)
+
+    def _on_position(self, index: int, driver: Driver, truth: bool, now: float) -> None:
+        """A position sample for the metrics: the true one from a simulator (SIM_STATE), else
+        the reported one (CONTRACTS.md: distances and tracking error use true positions)."""
+        tel = driver.telemetry
+        position = tel.true_position_enu if truth else tel.position_enu
+        velocity = tel.true_velocity_enu if truth else tel.velocity_enu
+        vehicle_s = tel.true_vehicle_time_s if truth else tel.position_vehicle_time_s
+        if position is None:
+            return
+        track = self.tracks[index]
+        track.last_position = position
+        track.last_velocity = velocity
+        if self.clock.anchored:
+            t = self._vehicle_clocks[index].mission_time(vehicle_s, self.clock.mission_time(now))
+            track.last_sample_time = t
+            self._samples.append((index, t, position[:2].copy()))
+        else:
+            self.recorder.state(
+                driver.uav_id,
+                {
+                    "t": None,
+                    "uav": driver.uav_id,
+                    "phase": driver.phase.value,
+                    "position": _list(tel.position_enu),
+                    "true_position": _list(tel.true_position_enu),
+                    "armed": tel.armed,
+                    "mode": tel.custom_mode,
+                    "landed_state": int(tel.landed_state),
+                },
+                now,
+            )
+
+    def _monitor(self, t: float, now: float) -> None:
+        events: list[MonitorEvent] = []
+        if self._samples:
+            uavs = np.array([s[0] for s in self._samples])
+            times = np.array([s[1] for s in self._samples])
+            xy = np.array([s[2] for s in self._samples])
+            self._samples = []
+            rows = np.arange(len(uavs))
+            virtual = self.formation.positions(self.profile.distance(times))[rows, uavs]
+            reference = smoothed_reference(self.formation, self.profile, times, self.window_s)
+            smooth = reference.positions[rows, uavs]
+            errors = np.hypot(*(xy - virtual).T)
+            control = np.hypot(*(xy - smooth).T)
+            self.tracking_now[uavs] = errors
+            events += self.safety.tracking(t, uavs, errors, control)
+            for k, index in enumerate(uavs.tolist()):
+                driver = self.drivers[index]
+                tel = driver.telemetry
+                self.recorder.state(
+                    driver.uav_id,
+                    {
+                        "t": float(times[k]),
+                        "uav": driver.uav_id,
+                        "phase": driver.phase.value,
+                        "position": _list(tel.position_enu),
+                        "true_position": _list(tel.true_position_enu),
+                        "velocity": _list(tel.velocity_enu),
+                        "virtual_target": virtual[k].tolist(),
+                        "tracking_error_m": float(errors[k]),
+                        "armed": tel.armed,
+                        "mode": tel.custom_mode,
+                        "landed_state": int(tel.landed_state),
+                    },
+                    now,
+                )
+        # The fleet now: each UAV's last sample moved on by its velocity (samples are up to a
+        # telemetry period old); a UAV silent for longer than that is unknown, not guessed.
+        positions = np.full((self.size, 2), np.nan)
+        for index, track in enumerate(self.tracks):
+            if track.last_position is None or track.last_sample_time is None:
+                continue
+            age = t - track.last_sample_time
+            if age > MAX_EXTRAPOLATION_S or self.links.lost[index]:
+                continue
+            xy = track.last_position[:2]
+            if track.last_velocity is not None:
+                xy = xy + track.last_velocity[:2] * max(age, 0.0)
+            positions[index] = xy
+        events += self.safety.positions(t, positions)
+        silent = np.array([d.link.silent_for(now) for d in self.drivers])
+        timeout = max(
+            self.options.link_timeout_s / self.options.speedup, self.options.link_wall_floor_s
+        )
+        active = np.array([d.phase not in (Phase.LANDED, Phase.FAILED) for d in self.drivers])
+        silent = np.where(active, silent, 0.0)
+        events += self.links.check(t, silent, timeout)
+        for event in events:
+            self._event(event, now)
+        if self._last_metrics is None or t - self._last_metrics >= self.options.metrics_period_s:
+            self._last_metrics = t
+            stats = self.safety.stats
+            self.recorder.metrics(
+                {
+                    "t": t,
+                    "formation_speed": float(self.profile.speed_at(t)),
+                    "distance": float(self.profile.distance(t)),
+                    "min_uav_uav_m": _finite(stats.min_uav_uav_m),
+                    "min_uav_obstacle_m": _finite(stats.min_uav_obstacle_m),
+                    "max_tracking_error_m": _finite(
+                        float(np.max(stats.max_tracking_error_m, initial=0.0))
+                    ),
+                    "tracking_error_m": [_finite(e) for e in self.tracking_now.tolist()],
+                    "connected": stats.last_connected,
+                },
+                now,
+            )
+
+    def _link_policy(self, t: float, now: float) -> None:
+        lost = self.links.lost
+        if lost.any() and not self.aborting:
+            if self.frozen_by != "link":
+                if self.frozen_by is None:
+                    self._freeze("link", now)
+                self.frozen_by = "link"
+                if self.options.interactive:
+                    self.view.message(
+                        "error", "link lost: formation frozen. Type a speed to resume, or 'land'."
+                    )
+                else:
+                    self._link_deadline = t + self.options.link_wait_s
+            elif self._link_deadline is not None and t >= self._link_deadline:
+                gone = ", ".join(str(i + 1) for i in np.flatnonzero(lost))
+                self.land_everyone(f"link of UAV {gone} lost for {self.options.link_wait_s:g} s")
+        elif self.frozen_by == "link" and not self.aborting and not self.options.interactive:
+            self._link_deadline = None
+            self._resume(now)
+
+    def _collect_acks(self, now: float) -> None:
+        speedup = self.options.speedup
+        for record in self._records:
+            seq = record.change.seq
+            for driver in self.drivers:
+                uav = driver.uav_id
+                if uav in record.acks or uav in record.refused:
+                    continue
+                result = driver.speed_results.get(seq, -1)
+                if result == -1:
+                    continue
+                if result == mavlink.MAV_RESULT_ACCEPTED and seq in driver.speed_acks:
+                    reaction = (driver.speed_acks[seq] - record.broadcast_wall) * speedup
+                    self.speeds.acknowledge(record, uav, reaction)
+                    kind = "ack"
+                else:
+                    record.refused[uav] = "no answer" if result is None else str(result)
+                    reaction = None
+                    kind = "refused"
+                self.recorder.speed(
+                    {
+                        "t": self.clock.mission_time(now),
+                        "kind": kind,
+                        "seq": seq,
+                        "uav": uav,
+                        **({"reaction_s": reaction} if reaction is not None else {}),
+                    },
+                    now,
+                )
+
+    def _drain_driver_events(self, now: float) -> None:
+        for driver in self.drivers:
+            for event in driver.drain_events():
+                self._driver_event(driver, event, now)
+            if driver.phase == Phase.LANDED:
+                track = self.tracks[driver.uav_id - 1]
+                if track.landed_time is None and self.clock.anchored:
+                    track.landed_time = self.clock.mission_time(now)
+                    if track.last_position is not None:
+                        track.final_xy = track.last_position[:2].copy()
+
+    def _driver_event(self, driver: Driver, event: DriverEvent, now: float) -> None:
+        level = _SEVERITY_LEVEL.get(event.severity, "info")
+        self.recorder.event(
+            level, f"UAV {driver.uav_id}: {event.text}", now, name=f"uav{driver.uav_id}"
+        )
+        if event.kind in ("phase", "failed") and level in ("error", "fatal"):
+            self.view.message(level, f"UAV {driver.uav_id}: {event.text}")
+        if driver.phase == Phase.FAILED and self.clock.anchored and not self.aborting:
+            self.fatal = True
+            self.land_everyone(f"UAV {driver.uav_id} failed: {driver.failure_reason}")
+
+    def _poll_fleet(self, now: float) -> None:
+        if self.fleet is None:
+            return
+        for problem in self.fleet.poll():
+            t = self.clock.mission_time(now) if self.clock.anchored else 0.0
+            if not self.clock.anchored or not problem.uavs:
+                self._event(MonitorEvent(t, "error", "vehicle_exit", problem.text, fatal=True), now)
+                if not self.clock.anchored:
+                    self.aborting = True
+                continue
+            for uav in problem.uavs:
+                silent = self.drivers[uav - 1].link.silent_for(now)
+                for event in self.links.mark_lost(t, uav - 1, problem.text, silent):
+                    self._event(event, now)
+
+    def _event(self, event: MonitorEvent, now: float) -> None:
+        self.events.append(event)
+        if event.fatal:
+            self.fatal = True
+            self.reason = self.reason or event.text
+        self.recorder.event(event.level, event.text, now)
+        self.view.message(event.level, event.text)
+        (log.warning if event.level != "info" else log.info)("t=%.2f %s", event.t, event.text)
+
+    def _finished(self, now: float) -> bool:
+        lost = self.links.lost
+        done = [
+            d.phase in (Phase.LANDED, Phase.FAILED) or (self.aborting and lost[i])
+            for i, d in enumerate(self.drivers)
+        ]
+        if all(done):
+            return True
+        if self.aborting and self._abort_time is not None:
+            t = self.clock.mission_time(now)
+            if t - self._abort_time > self.options.finish_timeout_s:
+                self._event(
+                    MonitorEvent(t, "error", "abort_timeout", "gave up waiting for the landings"),
+                    now,
+                )
+                return True
+        return False
+
+    # ------------------------------------------------------------------ result
+    def _result(self) -> RunResult:
+        stats = self.safety.stats
+        takeoffs = [tr.takeoff_time for tr in self.tracks if tr.takeoff_time is not None]
+        landings = [tr.landed_time for tr in self.tracks if tr.landed_time is not None]
+        landing_error = []
+        for index, track in enumerate(self.tracks):
+            xy = track.final_xy
+            landing_error.append(
+                None if xy is None else float(np.hypot(*(xy - self.formation.goal_slots[index])))
+            )
+        on_slots = all(e is not None and e < self.mission.safety_margin for e in landing_error)
+        completed = (
+            not self.aborting
+            and self.clock.anchored
+            and all(d.phase == Phase.LANDED for d in self.drivers)
+            and all(tr.land_sent for tr in self.tracks)
+            and on_slots
+        )
+        if not completed and self.reason is None:
+            self.reason = (
+                "a UAV landed off its arrival slot"
+                if not on_slots and all(d.phase == Phase.LANDED for d in self.drivers)
+                else "the mission did not complete"
+            )
+        sampled = stats.samples > 0 or np.any(stats.max_tracking_error_m > 0)
+        walls = np.array(self._tick_walls)
+        periods = np.diff(walls) if len(walls) > 2 else np.zeros(0)
+        nominal = self.tick_period_wall
+        jitter = (
+            float(np.percentile(np.abs(periods - nominal), 99) * 1000) if periods.size else None
+        )
+        rate = float(1.0 / periods.mean() / self.options.speedup) if periods.size else None
+        noise = getattr(getattr(self.mission.sim, "noise", None), "position_m", None)
+        return RunResult(
+            completed=bool(completed and not self.fatal),
+            reason=None if (completed and not self.fatal) else self.reason,
+            fleet_size=self.size,
+            duration_s=(max(landings) - min(takeoffs)) if takeoffs and landings else None,
+            min_uav_uav_m=_finite(stats.min_uav_uav_m),
+            min_uav_obstacle_m=_finite(stats.min_uav_obstacle_m),
+            max_tracking_error_m=float(stats.max_tracking_error_m.max()) if sampled else None,
+            tracking_error_m=[float(e) for e in stats.max_tracking_error_m]
+            if sampled
+            else [None] * self.size,
+            control_error_m=[float(e) for e in stats.max_control_error_m]
+            if sampled
+            else [None] * self.size,
+            landing_error_m=landing_error,
+            connected_fraction=stats.connected_fraction,
+            speed_changes=self.speeds.as_json(),
+            events=list(self.events),
+            phases=[d.phase.value for d in self.drivers],
+            smoothing_window_s=self.window_s,
+            smoothing_error_m=self.smoothing_bound(),
+            noise_m=noise,
+            setpoints_sent=sum(d.setpoints_sent for d in self.drivers),
+            setpoint_rate_hz=rate,
+            setpoint_jitter_p99_ms=jitter,
+            setpoint_period_ms=nominal * 1000,
+            setpoint_max_gap_ms=float(periods.max() * 1000) if periods.size else None,
+            ticks=self.ticks,
+            interrupted=self.interrupts,
+            fatal=self.fatal,
+        )
+
+
+def _list(array: np.ndarray | None) -> list | None:
+    return None if array is None else array.tolist()
+
+
+def _finite(value: float | None) -> float | None:
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None

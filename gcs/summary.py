@@ -1,0 +1,190 @@
+"""The run's summary: the run JSON of CONTRACTS.md and the human table (rich).
+
+Run JSON fields (CONTRACTS.md), all times in mission seconds:
+* `completed`: every UAV landed on its arrival slot, nothing aborted, no safety bound broken;
+* `fleet_size`; `duration_s`: from the first take-off to the last landing;
+* `min_uav_uav_m`, `min_uav_obstacle_m`: horizontal, over every UAV (parked ones included),
+  from the positions the vehicles report;
+* `max_tracking_error_m`: max |position - V_n(t)| (the paper's virtual target, not the
+  smoothed reference);
+* `connected_fraction`: fraction of samples at which every UAV had a multi-hop radio path
+  (hops <= radio range) to a base station;
+* `speed_changes`: `[{seq, effective_s, speed, source, requested_s, acks: {"<uav>": T_dv}}]`,
+  T_dv from the request to that UAV's acknowledgement;
+* `log`: the MCAP file.
+Extra fields: `reason` (when not completed), `exit_status`, `per_uav` (tracking, control and
+landing errors, final phase), `budget` (smoothing window and bound, worst control error,
+navigation noise, against rho_c), `setpoints` (sent, achieved rate, p99 period jitter), `events`
+(the monitors' errors and warnings).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from rich.console import Group
+from rich.table import Table
+
+from gcs.runtime import RunResult
+
+EXIT_COMPLETED, EXIT_ABORTED = 0, 1
+
+
+def exit_status(result: RunResult) -> int:
+    """0 completed; 1 aborted or a safety bound broken (CONTRACTS.md)."""
+    return EXIT_COMPLETED if result.completed and not result.fatal else EXIT_ABORTED
+
+
+def run_json(result: RunResult, log_path: str, safety_margin: float) -> dict[str, Any]:
+    """The run JSON (strict JSON: no NaN or infinity)."""
+    out: dict[str, Any] = {
+        "completed": result.completed,
+        "fleet_size": result.fleet_size,
+        "duration_s": _num(result.duration_s),
+        "min_uav_uav_m": _num(result.min_uav_uav_m),
+        "min_uav_obstacle_m": _num(result.min_uav_obstacle_m),
+        "max_tracking_error_m": _num(result.max_tracking_error_m),
+        "connected_fraction": _num(result.connected_fraction),
+        "speed_changes": result.speed_changes,
+        "log": log_path,
+        "exit_status": exit_status(result),
+        "per_uav": [
+            {
+                "uav": i + 1,
+                "phase": result.phases[i],
+                "max_tracking_error_m": _num(result.tracking_error_m[i]),
+                "max_control_error_m": _num(result.control_error_m[i]),
+                "landing_error_m": _num(result.landing_error_m[i]),
+            }
+            for i in range(result.fleet_size)
+        ],
+        "budget": {
+            "safety_margin_m": safety_margin,
+            "smoothing_window_s": result.smoothing_window_s,
+            "smoothing_error_m": _num(result.smoothing_error_m),
+            "control_error_m": _num(_max(result.control_error_m)),
+            "navigation_noise_m": _num(result.noise_m),
+        },
+        "setpoints": {
+            "sent": result.setpoints_sent,
+            "rate_hz": _num(result.setpoint_rate_hz),
+            "period_ms": result.setpoint_period_ms,
+            "jitter_p99_ms": _num(result.setpoint_jitter_p99_ms),
+            "max_gap_ms": _num(result.setpoint_max_gap_ms),
+        },
+        "events": [
+            {"t": _num(e.t), "level": e.level, "kind": e.kind, "text": e.text, "uav": e.uav}
+            for e in result.events
+            if e.level in ("error", "warning")
+        ],
+    }
+    if not result.completed:
+        out["reason"] = result.reason or "the mission did not complete"
+    return out
+
+
+def summary_renderable(result: RunResult, log_path: str, safety_margin: float) -> Group:
+    """The human summary: outcome, distances, budget per UAV, speed changes, setpoints."""
+    status = "completed" if result.completed else f"NOT completed: {result.reason}"
+    top = Table(title=f"run: {status}", show_header=False)
+    top.add_column("", style="bold")
+    top.add_column("")
+    top.add_row("fleet", f"{result.fleet_size} UAVs")
+    top.add_row("duration", _fmt(result.duration_s, "s", 1) + " (first take-off to last landing)")
+    top.add_row(
+        "min UAV-UAV",
+        _fmt(result.min_uav_uav_m, "m") + f" (2 rho_c = {2 * safety_margin:g} m by design)",
+    )
+    top.add_row(
+        "min UAV-obstacle",
+        _fmt(result.min_uav_obstacle_m, "m") + f" (rho_c = {safety_margin:g} m by design)",
+    )
+    top.add_row(
+        "max tracking error",
+        _fmt(result.max_tracking_error_m, "m") + f" (must stay < rho_c = {safety_margin:g} m)",
+    )
+    connected = result.connected_fraction
+    top.add_row("connected", "n/a" if connected is None else f"{100 * connected:.1f} % of samples")
+    rate = result.setpoint_rate_hz
+    top.add_row(
+        "setpoints",
+        f"{result.setpoints_sent} sent, "
+        + ("n/a" if rate is None else f"{rate:.1f} Hz")
+        + " mission-time rate, p99 period jitter "
+        + _fmt(result.setpoint_jitter_p99_ms, "ms", 2)
+        + f", longest gap {_fmt(result.setpoint_max_gap_ms, 'ms', 1)}"
+        + f" (period {result.setpoint_period_ms:.1f} ms wall)",
+    )
+    top.add_row("log", log_path)
+
+    budget = Table(title="error budget per UAV (m)")
+    for name in (
+        "UAV",
+        "phase",
+        "tracking |R-V|",
+        "smoothing",
+        "control |R-ref|",
+        "noise",
+        "landing",
+    ):
+        budget.add_column(name, justify="right")
+    for i in range(result.fleet_size):
+        budget.add_row(
+            str(i + 1),
+            result.phases[i],
+            _fmt(result.tracking_error_m[i]),
+            _fmt(result.smoothing_error_m),
+            _fmt(result.control_error_m[i]),
+            _fmt(result.noise_m),
+            _fmt(result.landing_error_m[i]),
+        )
+    parts: list[Any] = [top, budget]
+
+    if result.speed_changes:
+        speeds = Table(title="speed changes (T_dv = request -> acknowledgement, mission s)")
+        for name in ("seq", "source", "speed", "requested", "effective", "acks", "worst T_dv"):
+            speeds.add_column(name, justify="right")
+        for change in result.speed_changes:
+            acks = change["acks"]
+            worst = max(acks.values()) if acks else None
+            speeds.add_row(
+                str(change["seq"]),
+                change["source"],
+                f"{change['speed']:g} m/s",
+                f"{change['requested_s']:.2f}",
+                f"{change['effective_s']:.2f}",
+                f"{len(acks)}/{result.fleet_size}",
+                _fmt(worst, "s", 3),
+            )
+        parts.append(speeds)
+
+    bad = [e for e in result.events if e.level in ("error", "warning")]
+    if bad:
+        events = Table(title="events")
+        for name in ("t (s)", "level", "event"):
+            events.add_column(name)
+        for e in bad[:30]:
+            events.add_row(f"{e.t:.2f}", e.level, e.text)
+        if len(bad) > 30:
+            events.add_row("", "", f"... {len(bad) - 30} more in the log")
+        parts.append(events)
+    return Group(*parts)
+
+
+def _num(value: float | None) -> float | None:
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _max(values: list[float | None]) -> float | None:
+    known = [v for v in values if v is not None]
+    return max(known) if known else None
+
+
+def _fmt(value: float | None, unit: str = "", digits: int = 2) -> str:
+    if value is None or not math.isfinite(value):
+        return "n/a"
+    return f"{value:.{digits}f}" + (f" {unit}" if unit else "")

@@ -1,0 +1,580 @@
+"""Graph nodes (paper sec. IV-B1, eqs. 39-40; DESIGN 3.1) and lazily built edges (def. 5;
+DESIGN 3.2).
+
+Nodes: A, B; for each obstacle segment C_i D_i four points rho_c beyond each end along the
+segment and rho_c to either side (eq. 39, with the erratum: the D rows use D_i); A+-, B+- at
+rho_c sqrt(2) from A and B perpendicular to the parking rows (eq. 40). Nodes closer than the
+distance tolerance are merged, nodes inside an obstacle's margin dropped.
+
+Edges are never built for all node pairs. `EdgeCache` computes the out-edges of a node the
+first time the search needs them, for the whole spatial tile around it at once (vectorised
+pairs; obstacle clearance through the prepared union of `Obstacles.segments_within`). Only the
+obstacle part of definition 5 is cached; the parking-row part depends on the fleet size and is
+applied by the search (`row_edge_mask`).
+
+Two graphs share this code:
+* the *full* graph of definition 5 (every node, every clear pair);
+* the *taut* graph, used first: only nodes a shortest path can bend at (a node on the flat
+  margin of its own obstacle's side cannot be a bend of a taut path), and only edges that are
+  tangent at both ends to the mitre corner the node goes round (an edge into the corner's cone,
+  or straight away from it, is never part of a locally shortest path). The search adds the
+  matching transition rule (a bend wraps round the node's corner). On large maps the taut
+  graph's candidate targets come from a radius query completed per octant, so each node
+  reaches its nearest nodes in every direction, plus B always.
+Both graphs drop an edge v->w that passes exactly through another node x with valid edges
+v->x and x->w (a straight chain replaces it; the returned path is simplified back).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import shapely
+
+from planner.formation import ANGLE_TOLERANCE, DISTANCE_TOLERANCE, SQRT2
+
+if TYPE_CHECKING:
+    from planner.search import PathProblem
+
+START = 0  #: index of A in `Nodes`
+GOAL = 1  #: index of B in `Nodes`
+KIND_START, KIND_GOAL, KIND_ROW, KIND_OBSTACLE = 0, 1, 2, 3
+
+#: Candidate pairs per batch when out-edges are computed tile by tile.
+_BATCH_PAIRS = 20000
+#: Nearest obstacles of a source node whose angular shadows cull candidate targets.
+_OCCLUDERS = 12
+#: Octant completion: each node gets at least this many candidate targets per octant.
+_OCTANT_MIN = 2
+
+
+@dataclass(frozen=True, eq=False)
+class Nodes:
+    """Graph nodes (DESIGN 3.1). Index 0 is A, 1 is B.
+
+    `anchor` is the obstacle corner (segment end) a node goes round and `cone` the directions
+    of the two mitre-rectangle edges that meet at the node (they span the obstacle side);
+    `prunable` says a node has exactly one such corner, so the taut rules apply; `flat` marks a
+    node on the margin of a side of its own obstacle (never a bend of a taut path).
+    """
+
+    points: np.ndarray  # (n, 2)
+    kind: np.ndarray  # (n,) KIND_*
+    clearance: np.ndarray  # (n,) distance to the nearest obstacle
+    anchor: np.ndarray  # (n, 2), nan when none
+    cone: np.ndarray  # (n, 2, 2)
+    prunable: np.ndarray  # (n,) bool
+    flat: np.ndarray  # (n,) bool
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+def graph_nodes(problem: PathProblem) -> Nodes:
+    """Nodes of sec. IV-B1: A, B, A+-, B+- (eq. 40), four per segment end (eq. 39), merged
+    when closer than `DISTANCE_TOLERANCE`, dropped inside an obstacle's margin."""
+    rho = problem.safety_margin
+    obstacles = problem.obstacles
+    start, goal = problem.start, problem.goal
+    ab = math.atan2(*(goal - start)[::-1])
+    offsets = np.radians(
+        [
+            problem.start_angle_deg - 90.0,  # A+
+            problem.start_angle_deg + 90.0,  # A-
+            problem.goal_angle_deg + 90.0,  # B+
+            problem.goal_angle_deg - 90.0,  # B-
+        ]
+    )
+    row_pts = np.array([start, start, goal, goal]) + rho * SQRT2 * np.column_stack(
+        [np.cos(ab + offsets), np.sin(ab + offsets)]
+    )
+    base_pts = np.vstack([start, goal, row_pts])
+    base_kind = np.array([KIND_START, KIND_GOAL] + [KIND_ROW] * 4)
+
+    segs = obstacles.segments
+    c, d = segs[:, 0], segs[:, 1]
+    vec = d - c
+    length = np.hypot(vec[:, 0], vec[:, 1])
+    u = np.where(length[:, None] > DISTANCE_TOLERANCE, vec, [1.0, 0.0])
+    u = u / np.hypot(u[:, 0], u[:, 1])[:, None]
+    n = np.column_stack([u[:, 1], -u[:, 0]])  # right-hand normal
+    pts, anchors, cones = [], [], []
+    for side in (1.0, -1.0):  # eq. 39: C+-, D+- (D rows use D_i: DESIGN erratum)
+        pts += [c - rho * u + side * rho * n, d + rho * u + side * rho * n]
+        anchors += [c, d]
+        cones += [np.stack([u, -side * n], axis=1), np.stack([-u, -side * n], axis=1)]
+    obs_pts = np.concatenate(pts) if len(segs) else np.zeros((0, 2))
+    obs_anchor = np.concatenate(anchors) if len(segs) else np.zeros((0, 2))
+    obs_cone = np.concatenate(cones) if len(segs) else np.zeros((0, 2, 2))
+    obs_owner = np.tile(obstacles.segment_owner, 4)
+
+    all_pts = np.vstack([base_pts, obs_pts])
+    kind = np.concatenate([base_kind, np.full(len(obs_pts), KIND_OBSTACLE)])
+    anchor = np.vstack([np.full((6, 2), np.nan), obs_anchor])
+    cone = np.concatenate([np.zeros((6, 2, 2)), obs_cone])
+
+    # Flat: the node lies on the margin of its own obstacle (a side next to its corner).
+    flat = np.zeros(len(all_pts), bool)
+    if len(obs_pts):
+        own = shapely.distance(shapely.points(obs_pts), obstacles.geometries[obs_owner])
+        flat[6:] = own <= rho + DISTANCE_TOLERANCE
+
+    label = _merge_labels(all_pts)
+    rep = label == np.arange(len(all_pts))
+    # A merged node keeps the taut rules only if every member has the same corner and cone.
+    # (The cone is an unordered pair of directions: a corner's two sides list it in turn.)
+    same_cone = np.all(np.abs(cone - cone[label]).reshape(-1, 4) <= ANGLE_TOLERANCE, axis=1)
+    swapped = np.all(np.abs(cone[:, ::-1] - cone[label]).reshape(-1, 4) <= ANGLE_TOLERANCE, axis=1)
+    same = (
+        (kind == KIND_OBSTACLE)
+        & (kind[label] == KIND_OBSTACLE)
+        & np.all(np.abs(anchor - anchor[label]) <= DISTANCE_TOLERANCE, axis=1)
+        & (same_cone | swapped)
+    )
+    prunable = np.ones(len(all_pts), bool)
+    np.logical_and.at(prunable, label, same)
+    flat_any = np.zeros(len(all_pts), bool)
+    np.logical_or.at(flat_any, label, flat)
+
+    clearance = obstacles.distance_to_points(all_pts)
+    keep = rep & ((kind <= KIND_GOAL) | (clearance >= rho - DISTANCE_TOLERANCE))
+    idx = np.flatnonzero(keep)
+    return Nodes(
+        points=all_pts[idx],
+        kind=kind[idx],
+        clearance=clearance[idx],
+        anchor=anchor[idx],
+        cone=cone[idx],
+        prunable=prunable[idx] & (kind[idx] == KIND_OBSTACLE),
+        flat=flat_any[idx],
+    )
+
+
+def _merge_labels(points: np.ndarray) -> np.ndarray:
+    """Label of each point = smallest index among the points within the tolerance of it
+    (transitively), found by label propagation over STRtree pairs."""
+    label = np.arange(len(points))
+    if len(points) < 2:
+        return label
+    tree = shapely.STRtree(shapely.points(points))
+    i, j = tree.query(shapely.points(points), predicate="dwithin", distance=DISTANCE_TOLERANCE)
+    pair = i != j
+    i, j = i[pair], j[pair]
+    while len(i):
+        new = label.copy()
+        np.minimum.at(new, i, label[j])
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    return label
+
+
+def tangent(nodes: Nodes, index: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """True where the line through node `index` along `direction` (either sense) does not cut
+    the mitre corner the node goes round: the direction is not strictly inside the corner's
+    cone nor its opposite. Always True for nodes without a single corner."""
+    cone = nodes.cone[index]
+    along_a = np.einsum("ki,ki->k", direction, cone[:, 0])
+    along_b = np.einsum("ki,ki->k", direction, cone[:, 1])
+    eps = ANGLE_TOLERANCE * np.hypot(direction[:, 0], direction[:, 1])
+    inside = (along_a > eps) & (along_b > eps)
+    opposite = (along_a < -eps) & (along_b < -eps)
+    return ~nodes.prunable[index] | ~(inside | opposite)
+
+
+def corner_side(nodes: Nodes, index: np.ndarray, unit: np.ndarray) -> np.ndarray:
+    """Cross product of an edge direction with the vector from node `index` to its corner:
+    > 0 when the corner lies to the left of the edge (nan for nodes without a corner)."""
+    rel = nodes.anchor[index] - nodes.points[index]
+    return unit[:, 0] * rel[:, 1] - unit[:, 1] * rel[:, 0]
+
+
+def wraps_corner(
+    incoming: np.ndarray, outgoing: np.ndarray, side_in: float, side_out: np.ndarray
+) -> np.ndarray:
+    """Taut transition rule at a node (unit `incoming`, unit `outgoing` (k, 2), corner sides
+    of both edges from `corner_side`): straight on, or a bend towards the node's corner with
+    the corner on the inner side of both edges."""
+    turn = incoming[0] * outgoing[:, 1] - incoming[1] * outgoing[:, 0]
+    straight = np.abs(turn) <= ANGLE_TOLERANCE
+    if side_in > 0:
+        return straight | ((turn > 0) & (side_out > 0))
+    if side_in < 0:
+        return straight | ((turn < 0) & (side_out < 0))
+    return straight
+
+
+def segments_clear_of_rows(
+    starts: np.ndarray,
+    ends: np.ndarray,
+    from_start: np.ndarray,
+    to_goal: np.ndarray,
+    start_row: shapely.Geometry,
+    goal_row: shapely.Geometry,
+    safety_margin: float,
+) -> np.ndarray:
+    """Def. 5 / eq. 35 with the DESIGN 3.2 erratum: a segment not starting at A keeps
+    2 rho_c from Delta_A, a segment not ending at B keeps 2 rho_c from Delta_B."""
+    ok = np.ones(len(starts), bool)
+    if len(starts) == 0:
+        return ok
+    limit = 2.0 * safety_margin - DISTANCE_TOLERANCE
+    low, high = np.minimum(starts, ends), np.maximum(starts, ends)
+    for row, exempt in ((start_row, from_start), (goal_row, to_goal)):
+        xmin, ymin, xmax, ymax = shapely.bounds(row)
+        near = (
+            ~exempt
+            & (low[:, 0] <= xmax + limit)
+            & (high[:, 0] >= xmin - limit)
+            & (low[:, 1] <= ymax + limit)
+            & (high[:, 1] >= ymin - limit)
+        )
+        test = np.flatnonzero(near)
+        if len(test):
+            lines = shapely.linestrings(np.stack([starts[test], ends[test]], axis=1))
+            ok[test] &= ~shapely.dwithin(row, lines, limit)
+    return ok
+
+
+def parking_angles_ok(
+    directions: np.ndarray,
+    from_start: np.ndarray,
+    to_goal: np.ndarray,
+    start_direction: np.ndarray,
+    goal_direction: np.ndarray,
+) -> np.ndarray:
+    """Def. 5 / eq. 36: a first segment within 90 degrees of e_0, a last one within 90 degrees
+    of e_K (angle tolerance 1e-9 rad)."""
+    norm = np.hypot(directions[:, 0], directions[:, 1])
+    floor = -np.sin(ANGLE_TOLERANCE) * norm
+    ok = np.ones(len(directions), bool)
+    ok[from_start] &= directions[from_start] @ start_direction >= floor[from_start]
+    ok[to_goal] &= directions[to_goal] @ goal_direction >= floor[to_goal]
+    return ok
+
+
+def edge_ok(problem: PathProblem, rows, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Definition 5 for segments starts[k] -> ends[k] (each (k, 2)), vectorised: clear of every
+    obstacle by rho_c, of the rows by 2 rho_c (erratum of DESIGN 3.2) and within 90 degrees of
+    the parking directions at A and B. `rows` is a `ParkingRows`."""
+    starts = np.asarray(starts, float).reshape(-1, 2)
+    ends = np.asarray(ends, float).reshape(-1, 2)
+    rho = problem.safety_margin
+    from_start = np.all(np.abs(starts - problem.start) <= DISTANCE_TOLERANCE, axis=1)
+    to_goal = np.all(np.abs(ends - problem.goal) <= DISTANCE_TOLERANCE, axis=1)
+    ok = ~problem.obstacles.segments_within(
+        np.stack([starts, ends], axis=1), rho - DISTANCE_TOLERANCE
+    )
+    ok &= segments_clear_of_rows(
+        starts,
+        ends,
+        from_start,
+        to_goal,
+        shapely.LineString(rows.start_row),
+        shapely.LineString(rows.goal_row),
+        rho,
+    )
+    ok &= parking_angles_ok(
+        ends - starts, from_start, to_goal, rows.start_direction, rows.goal_direction
+    )
+    ok &= np.hypot(*(ends - starts).T) > DISTANCE_TOLERANCE
+    return ok
+
+
+class EdgeCache:
+    """Obstacle-clear out-edges of graph nodes, computed on demand per spatial tile.
+
+    Edges are numbered in the order they are computed; `src`, `dst`, `length`, `direction`
+    (unit) and `penalty` (extra weight, for the repair loops) are indexed by edge number.
+    `edges(v)` returns the (lo, hi) range of node v's out-edges.
+    """
+
+    def __init__(
+        self,
+        problem: PathProblem,
+        nodes: Nodes,
+        *,
+        taut: bool,
+        prune_collinear: bool,
+        local_candidates: int | None = None,
+    ) -> None:
+        self.problem = problem
+        self.nodes = nodes
+        self.taut = taut
+        self.prune_collinear = prune_collinear
+        count = len(nodes)
+        if taut:
+            member = (nodes.kind <= KIND_GOAL) | ((nodes.kind == KIND_OBSTACLE) & ~nodes.flat)
+        else:
+            member = np.ones(count, bool)
+        self.members = np.flatnonzero(member)
+        self.targets = self.members[self.members != START]
+        self.first = np.full(count, -1, np.int64)
+        self.count = np.zeros(count, np.int64)
+        self.examined = 0
+        self.size = 0
+        self.src = np.zeros(0, np.int64)
+        self.dst = np.zeros(0, np.int64)
+        self.length = np.zeros(0)
+        self.direction = np.zeros((0, 2))
+        self.penalty = np.zeros(0)
+        self.side_at_src = np.zeros(0)  # corner_side of each edge at its source
+        self.side_at_dst = np.zeros(0)  # ... and at its destination
+        self.radius: float | None = None
+        self._shadow: tuple[np.ndarray, ...] | None = None
+        self._shadow_done = np.zeros(0, bool)
+        pts = nodes.points
+        if local_candidates is not None and len(self.targets) > 4 * local_candidates:
+            span = pts[self.targets].max(axis=0) - pts[self.targets].min(axis=0)
+            area = max(float(span[0] * span[1]), 1.0)
+            self.radius = math.sqrt(local_candidates * area / (math.pi * len(self.targets)))
+            self._target_tree = shapely.STRtree(shapely.points(pts[self.targets]))
+            self._extent = 2.0 * float(np.hypot(*span)) + 1.0
+        # Occluders: the obstacles nearest to a source node hide most targets (exact test).
+        obstacles = problem.obstacles
+        self._occluder_radius = math.inf
+        if len(obstacles) > _OCCLUDERS:
+            box = obstacles.vertex_table.reshape(-1, 2)
+            span = box.max(axis=0) - box.min(axis=0)
+            area = max(float(span[0] * span[1]), 1.0)
+            self._occluder_radius = math.sqrt(4.0 * _OCCLUDERS * area / (math.pi * len(obstacles)))
+        # Tiles: a square grid over the members, sized so a batch holds about _BATCH_PAIRS
+        # candidate pairs.
+        per_node = len(self.targets) if self.radius is None else 1.5 * local_candidates
+        tile_nodes = min(max(_BATCH_PAIRS / max(per_node, 1.0), 4.0), 128.0)
+        lo = pts[self.members].min(axis=0)
+        span = np.maximum(pts[self.members].max(axis=0) - lo, 1.0)
+        per_side = max(1, int(math.sqrt(len(self.members) / tile_nodes)))
+        cell = np.floor((pts - lo) / span * per_side).clip(0, per_side - 1).astype(np.int64)
+        self.tile = np.full(count, -1, np.int64)
+        self.tile[self.members] = cell[self.members, 0] * per_side + cell[self.members, 1]
+
+    # -- public -------------------------------------------------------------------------
+    def edges(self, v: int) -> tuple[int, int]:
+        """(lo, hi): edge numbers of v's out-edges, computing v's tile if needed."""
+        if self.first[v] < 0:
+            if self.tile[v] < 0:
+                return 0, 0
+            batch = self.members[(self.tile[self.members] == self.tile[v])]
+            self._compute(batch[self.first[batch] < 0])
+        lo = int(self.first[v])
+        return lo, lo + int(self.count[v])
+
+    def computed_edges(self) -> np.ndarray:
+        """Every edge computed so far as segments (E, 2, 2), for plots."""
+        pts = self.nodes.points
+        return np.stack([pts[self.src[: self.size]], pts[self.dst[: self.size]]], axis=1)
+
+    # -- batch computation --------------------------------------------------------------
+    def _candidate_pairs(self, sources: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Distinct (source, target) pairs to test: every target for A and for every source
+        when the radius is unlimited; otherwise the local pairs, plus B for every source."""
+        unlimited = sources if self.radius is None else sources[sources == START]
+        src = [np.repeat(unlimited, len(self.targets))]
+        dst = [np.tile(self.targets, len(unlimited))]
+        local = sources if self.radius is None else sources[sources != START]
+        if self.radius is not None and len(local):
+            s, t = self._local_pairs(local)
+            far_goal = np.hypot(*(self.nodes.points[local] - self.nodes.points[GOAL]).T)
+            far_goal = local[far_goal > self.radius]  # B not among the radius query's pairs
+            src += [s, far_goal]
+            dst += [t, np.full(len(far_goal), GOAL)]
+        src, dst = np.concatenate(src), np.concatenate(dst)
+        keep = src != dst
+        return src[keep], dst[keep]
+
+    def _local_pairs(self, sources: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Targets within the radius; then, for each octant (seen from a source) holding
+        fewer than _OCTANT_MIN of them, the nearest _OCTANT_MIN targets in that octant at any
+        distance (one query with the octants as wedges), so open areas are crossed."""
+        pts = self.nodes.points
+        where = shapely.points(pts[sources])
+        i, j = self._target_tree.query(where, predicate="dwithin", distance=self.radius)
+        src, dst = sources[i], self.targets[j]
+        octant = _octant(pts[dst] - pts[src])
+        have = np.bincount(i * 8 + octant, minlength=8 * len(sources)).reshape(-1, 8)
+        row, oct_ = np.nonzero(have < _OCTANT_MIN)
+        if len(row) == 0:
+            return src, dst
+        # Wedges: apex at the source, the octant's two bounding rays, long enough to leave
+        # the map; targets inside them beyond the radius are the candidates.
+        span = self._extent
+        a0 = -math.pi + oct_ * (math.pi / 4.0)
+        a1 = a0 + math.pi / 4.0
+        apex = pts[sources[row]]
+        reach = span / math.cos(math.pi / 8.0)
+        ring = np.stack(
+            [
+                apex,
+                apex + reach * np.column_stack([np.cos(a0), np.sin(a0)]),
+                apex + reach * np.column_stack([np.cos(a1), np.sin(a1)]),
+            ],
+            axis=1,
+        )
+        w, k = self._target_tree.query(shapely.polygons(ring), predicate="intersects")
+        s_new, t_new = sources[row[w]], self.targets[k]
+        d = pts[t_new] - pts[s_new]
+        dist = np.hypot(d[:, 0], d[:, 1])
+        inside = (_octant(d) == oct_[w]) & (dist > self.radius)
+        w, s_new, t_new, dist = w[inside], s_new[inside], t_new[inside], dist[inside]
+        order = np.lexsort((dist, w))
+        w, s_new, t_new = w[order], s_new[order], t_new[order]
+        rank = np.arange(len(w)) - np.searchsorted(w, w, side="left")
+        pick = rank < _OCTANT_MIN
+        return np.concatenate([src, s_new[pick]]), np.concatenate([dst, t_new[pick]])
+
+    def _compute(self, sources: np.ndarray) -> None:
+        nodes = self.nodes
+        pts = nodes.points
+        rho = self.problem.safety_margin
+        sources = np.sort(sources)
+        src, dst = self._candidate_pairs(sources)
+        self.examined += len(src)
+        d = pts[dst] - pts[src]
+        length = np.hypot(d[:, 0], d[:, 1])
+        keep = length > DISTANCE_TOLERANCE
+        if self.taut:
+            keep &= tangent(nodes, src, d) & tangent(nodes, dst, d)
+        idx = np.flatnonzero(keep)
+        if self.prune_collinear and len(idx):
+            # Before the clearance tests: if v->w is clear, so is its part v->x.
+            idx = idx[~_collinear_shadowed(src[idx], dst[idx], d[idx], length[idx], self.radius)]
+        idx = idx[~self._occluded(src[idx], dst[idx], d[idx], length[idx])]
+        segs = np.stack([pts[src[idx]], pts[dst[idx]]], axis=1)
+        idx = idx[~self.problem.obstacles.segments_within(segs, rho - DISTANCE_TOLERANCE)]
+        src, dst, d, length = src[idx], dst[idx], d[idx], length[idx]
+        order = np.argsort(src, kind="stable")
+        src, dst, d, length = src[order], dst[order], d[order], length[order]
+        self._append(sources, src, dst, d / length[:, None], length)
+
+    def _occluded(
+        self, src: np.ndarray, dst: np.ndarray, d: np.ndarray, length: np.ndarray
+    ) -> np.ndarray:
+        """True for pairs certainly blocked: seen from either end, the other end lies
+        strictly inside the angular shadow of one of that end's nearest obstacles, farther
+        than all of its vertices. (Such a segment crosses the obstacle: a connected obstacle
+        whose convex hull does not hold the viewpoint meets every ray strictly inside its
+        angular span, within its farthest vertex.) Cheap numpy culling before the exact
+        clearance test."""
+        if len(self.problem.obstacles) == 0 or len(src) == 0:
+            return np.zeros(len(src), bool)
+        self._ensure_shadows(np.unique(np.concatenate([src, dst])))
+        angle = np.arctan2(d[:, 1], d[:, 0])
+        blocked = self._in_shadow(src, angle, length)
+        rest = ~blocked
+        blocked[rest] = self._in_shadow(dst[rest], angle[rest] + math.pi, length[rest])
+        return blocked
+
+    def _in_shadow(self, node: np.ndarray, angle: np.ndarray, length: np.ndarray) -> np.ndarray:
+        ref, low, high, far = (a[node] for a in self._shadow)
+        rel = np.mod(angle[:, None] - ref + math.pi, 2.0 * math.pi) - math.pi
+        inside = (rel > low + ANGLE_TOLERANCE) & (rel < high - ANGLE_TOLERANCE)
+        return np.any(inside & (length[:, None] > far + DISTANCE_TOLERANCE), axis=1)
+
+    def _ensure_shadows(self, index: np.ndarray) -> None:
+        """Per node (rows) and occluder (columns), cached: reference angle, angular span
+        relative to it, and farthest vertex distance; unused slots never block."""
+        count = len(self.nodes)
+        if self._shadow is None:
+            shape = (count, _OCCLUDERS)
+            self._shadow = (
+                np.zeros(shape),
+                np.full(shape, np.inf),
+                np.full(shape, -np.inf),
+                np.full(shape, np.inf),
+            )
+            self._shadow_done = np.zeros(count, bool)
+        index = index[~self._shadow_done[index]]
+        if len(index) == 0:
+            return
+        self._shadow_done[index] = True
+        obstacles = self.problem.obstacles
+        pts = self.nodes.points[index]
+        where = shapely.points(pts)
+        if math.isinf(self._occluder_radius):
+            s = np.repeat(np.arange(len(index)), len(obstacles))
+            o = np.tile(np.arange(len(obstacles)), len(index))
+        else:
+            s, o = obstacles.tree.query(where, predicate="dwithin", distance=self._occluder_radius)
+        dist = shapely.distance(where[s], obstacles.geometries[o])
+        order = np.lexsort((dist, s))
+        s, o = s[order], o[order]
+        rank = np.arange(len(s)) - np.searchsorted(s, s, side="left")
+        keep = rank < _OCCLUDERS
+        s, o, rank = s[keep], o[keep], rank[keep]
+        usable = ~shapely.intersects(obstacles.hulls[o], where[s])
+        s, o, rank = s[usable], o[usable], rank[usable]
+        verts = obstacles.vertex_table[o] - pts[s][:, None, :]
+        centre = verts.mean(axis=1)
+        ref_s = np.arctan2(centre[:, 1], centre[:, 0])
+        ang = np.arctan2(verts[..., 1], verts[..., 0]) - ref_s[:, None]
+        ang = np.mod(ang + math.pi, 2.0 * math.pi) - math.pi
+        ref, low, high, far = self._shadow
+        rows = index[s]
+        ref[rows, rank] = ref_s
+        low[rows, rank] = ang.min(axis=1)
+        high[rows, rank] = ang.max(axis=1)
+        far[rows, rank] = np.hypot(verts[..., 0], verts[..., 1]).max(axis=1)
+
+    def _append(self, sources, src, dst, unit, length) -> None:
+        need = self.size + len(src)
+        if need > len(self.src):
+            cap = max(need, 2 * len(self.src), 1024)
+            self.src = _grow(self.src, cap)
+            self.dst = _grow(self.dst, cap)
+            self.length = _grow(self.length, cap)
+            self.direction = _grow(self.direction, cap)
+            self.penalty = _grow(self.penalty, cap)
+            self.side_at_src = _grow(self.side_at_src, cap)
+            self.side_at_dst = _grow(self.side_at_dst, cap)
+        sl = slice(self.size, need)
+        self.side_at_src[sl] = corner_side(self.nodes, src, unit)
+        self.side_at_dst[sl] = corner_side(self.nodes, dst, unit)
+        self.src[sl], self.dst[sl], self.length[sl], self.direction[sl] = src, dst, length, unit
+        self.penalty[sl] = 0.0
+        counts = np.bincount(np.searchsorted(sources, src), minlength=len(sources))
+        self.first[sources] = self.size + np.concatenate([[0], np.cumsum(counts)[:-1]])
+        self.count[sources] = counts
+        self.size = need
+
+
+def _grow(array: np.ndarray, capacity: int) -> np.ndarray:
+    out = np.zeros((capacity,) + array.shape[1:], array.dtype)
+    out[: len(array)] = array
+    return out
+
+
+def _octant(d: np.ndarray) -> np.ndarray:
+    angle = np.arctan2(d[:, 1], d[:, 0])
+    return (np.floor((angle + math.pi) / (math.pi / 4.0)).astype(np.int64)) % 8
+
+
+def _collinear_shadowed(
+    src: np.ndarray, dst: np.ndarray, d: np.ndarray, length: np.ndarray, radius: float | None
+) -> np.ndarray:
+    """True for edges v->w that pass through a nearer target x of v on the same ray (within
+    1e-9 m): v->x then x->w is the same line, with valid edges (sub-segments of a clear
+    segment, same tangency; x->w is no longer than v->w, so within x's candidate radius).
+    Edges from A or into B are never dropped (row exemptions), nor edges longer than the
+    candidate radius (they may come from the octant completion, which x does not share)."""
+    shadowed = np.zeros(len(src), bool)
+    usable = (src != START) & (dst != GOAL)
+    if radius is not None:
+        usable &= length <= radius
+    cand = np.flatnonzero(usable)
+    if len(cand) < 2:
+        return shadowed
+    angle = np.arctan2(d[cand, 1], d[cand, 0])
+    order = cand[np.lexsort((length[cand], angle, src[cand]))]
+    ang = np.arctan2(d[order, 1], d[order, 0])
+    new_group = np.ones(len(order), bool)
+    new_group[1:] = (src[order][1:] != src[order][:-1]) | (np.diff(ang) > 1e-11)
+    head = order[np.maximum.accumulate(np.where(new_group, np.arange(len(order)), 0))]
+    # distance of the group's nearest target x from the line v->w
+    offset = np.abs(d[order, 0] * d[head, 1] - d[order, 1] * d[head, 0]) / length[order]
+    shadowed[order] = ~new_group & (offset <= 1e-9) & (length[order] > length[head])
+    return shadowed

@@ -1,0 +1,875 @@
+"""Path search (paper sec. IV-B4, Algorithm 1, eqs. 42-47; DESIGN 3.3), the fleet-size
+iteration of finite parking rows (DESIGN 3.2) and the diagnosis when no valid path exists.
+
+`method="exact"` (default):
+1. A* with a Euclidean heuristic over *directed edges* (state = the last edge). A transition
+   is allowed only if the bend is at most 90 degrees; the first and last edges keep within 90
+   degrees of the parking directions (definition 5). The first walk reaching B is the shortest
+   meeting conditions (1)-(4) of definition 4. Each edge is relaxed once, from the cheapest
+   state that allows it (the state after a transition is the new edge alone), so the search
+   costs about as much as a Dijkstra over edges.
+2. If that walk breaks condition (5) or repeats a point (definition 1), a label search
+   enumerates partial walks in order of length (at most `_LABELS_PER_STATE` per directed
+   edge), extending one only if the simplified path stays valid: the next-shortest walks of
+   DESIGN 3.3, invalid prefixes pruned. It returns the shortest valid path, or proves there is
+   none when no edge ran out of labels.
+3. This runs first on the taut graph (`planner.graph`). Its answer is certified shortest when
+   its length equals the unconstrained shortest path (no constraint binds); otherwise the
+   full graph of definition 5 is searched for a shorter valid path, bounded by the taut
+   length (small maps). If the taut graph holds no valid path, the full graph is searched;
+   before that, A and B lying in different parts of the free space ends it at once.
+
+`method="penalty"`: the paper's loop, done properly: Dijkstra (A*) over nodes, then weights of
+offending edges grow by (violations they take part in) x (mean edge weight), eq. 46 counting
+the bends over 90 degrees and proximity between non-adjacent segments only (DESIGN 3.3
+errata); at most `max_penalty_iterations` rounds, on the full graph without pruning.
+
+Everything is capped by `max_expansions` (states taken off a queue, over every round, graph
+and fleet size); the planner has no clock.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from planner.formation import (
+    ANGLE_TOLERANCE,
+    DISTANCE_TOLERANCE,
+    ParkingRows,
+    min_fleet_size,
+    parking_rows,
+)
+from planner.graph import (
+    GOAL,
+    START,
+    EdgeCache,
+    Nodes,
+    graph_nodes,
+    parking_angles_ok,
+    segments_clear_of_rows,
+    wraps_corner,
+)
+from planner.obstacles import Obstacles
+from planner.validity import (
+    PathViolations,
+    Refusal,
+    check_path,
+    check_rows,
+    precheck,
+    precheck_issue,
+)
+
+__all__ = [
+    "PathPlan",
+    "PathProblem",
+    "Refusal",
+    "check_path",
+    "check_rows",
+    "plan_path",
+    "precheck",
+    "precheck_issue",
+]
+
+METHODS = ("exact", "penalty")
+#: Graphs with more candidate targets than 4x this use radius queries (DESIGN: scale): the
+#: taut graph (used first) and the full graph (the fallback, with more but flatter nodes).
+LOCAL_CANDIDATES = 250
+LOCAL_CANDIDATES_FULL = 150
+#: Largest graph (nodes) on which a taut path found under binding constraints is checked
+#: against the full graph (DESIGN 3.3: the taut graph is exact only when nothing binds).
+FULL_CHECK_NODES = 3000
+#: Repair search: partial walks kept per directed edge (DESIGN 3.3, next-shortest walks).
+_LABELS_PER_STATE = 8
+#: At most this many fleet-size rounds (N only grows; rows lengthen each round).
+MAX_FLEET_ROUNDS = 12
+
+
+@dataclass(frozen=True, eq=False)
+class PathProblem:
+    """A planning problem: A, B, parking angles theta_A, theta_B (degrees, counter-clockwise
+    from A->B), rho_c, rho_R, obstacles, parking mode ("segment" or the paper's "ray"), fleet
+    size (None = the minimum of eq. 28, grown with the path), method and caps."""
+
+    start: np.ndarray
+    goal: np.ndarray
+    start_angle_deg: float
+    goal_angle_deg: float
+    safety_margin: float
+    radio_range: float
+    obstacles: Obstacles
+    parking: str = "segment"
+    fleet_size: int | None = None
+    method: str = "exact"
+    max_expansions: int = 2_000_000
+    max_penalty_iterations: int = 50
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "start", np.asarray(self.start, float).reshape(2))
+        object.__setattr__(self, "goal", np.asarray(self.goal, float).reshape(2))
+        if self.parking not in ("segment", "ray"):
+            raise ValueError(f"parking must be 'segment' or 'ray', not {self.parking!r}")
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, not {self.method!r}")
+        if self.fleet_size is not None and self.fleet_size < 1:
+            raise ValueError(f"fleet_size must be >= 1, not {self.fleet_size}")
+
+
+@dataclass(frozen=True, eq=False)
+class PathPlan:
+    """The planner's answer. `reason` (one sentence) says why when `valid` is False; `path`
+    is then empty. `rows` are the parking rows for `fleet_size`. `iterations` counts search
+    rounds of the final graph (1 = the first walk was valid, 2 = the repair search ran;
+    penalty method: rounds of the loop); `level` names that graph ("taut", "full" or
+    "penalty"); `repairs` counts repaired walks. `certified` is True when the length is
+    proven minimal over the full graph of definition 5 (exact method; False when a check was
+    skipped on a large map or the repair search hit its label limit). `node_count` counts
+    graph nodes, `edges_examined` the node pairs considered, `edge_count` the edges found
+    valid against the obstacles (`candidate_edges`, for plots), `expansions` the states taken
+    off the queues; `fleet_rounds` the fleet sizes tried."""
+
+    valid: bool
+    reason: str | None
+    path: np.ndarray
+    length_m: float
+    fleet_size: int
+    min_fleet_size: int
+    rows: ParkingRows
+    iterations: int
+    expansions: int
+    node_count: int
+    edges_examined: int
+    candidate_edges: np.ndarray
+    violations: PathViolations | None = None
+    certified: bool = False
+    level: str = ""
+    repairs: int = 0
+    fleet_rounds: int = 1
+    edge_count: int = 0
+
+
+# ---------------------------------------------------------------------------------------
+# Row-dependent edge filter
+# ---------------------------------------------------------------------------------------
+
+
+class _RowFilter:
+    """The parking-row and parking-angle part of definition 5 for one set of rows, applied to
+    a cache's edges in bulk as the cache grows (one vectorised call per batch of edges)."""
+
+    def __init__(self, problem: PathProblem, rows: ParkingRows, nodes: Nodes) -> None:
+        self.problem = problem
+        self.rows = rows
+        self.start_row = shapely.LineString(rows.start_row)
+        self.goal_row = shapely.LineString(rows.goal_row)
+        shapely.prepare(self.start_row)
+        shapely.prepare(self.goal_row)
+        self.nodes = nodes
+        self._masks: dict[tuple, np.ndarray] = {}
+
+    def mask(
+        self,
+        cache: EdgeCache,
+        v: int,
+        departure: bool = True,
+        arrival: bool = True,
+        row_tests: bool = True,
+    ) -> np.ndarray:
+        """Which of v's out-edges pass the row tests and the departure/arrival angle tests
+        (each can be switched off, for the diagnosis). A read-only view."""
+        lo, hi = cache.edges(v)
+        key = (id(cache), departure, arrival, row_tests)
+        ok = self._masks.get(key, np.zeros(0, bool))
+        if len(ok) < cache.size:
+            ok = np.concatenate([ok, self._compute(cache, len(ok), key[1:])])
+            self._masks[key] = ok
+        return ok[lo:hi]
+
+    def _compute(self, cache: EdgeCache, first: int, flags: tuple[bool, bool, bool]) -> np.ndarray:
+        departure, arrival, row_tests = flags
+        src = cache.src[first : cache.size]
+        dst = cache.dst[first : cache.size]
+        pts = self.nodes.points
+        from_start = src == START
+        to_goal = dst == GOAL
+        ok = np.ones(len(src), bool)
+        if row_tests:
+            ok &= segments_clear_of_rows(
+                pts[src],
+                pts[dst],
+                from_start,
+                to_goal,
+                self.start_row,
+                self.goal_row,
+                self.problem.safety_margin,
+            )
+        if departure or arrival:
+            ok &= parking_angles_ok(
+                cache.direction[first : cache.size],
+                from_start & departure,
+                to_goal & arrival,
+                self.rows.start_direction,
+                self.rows.goal_direction,
+            )
+        return ok
+
+
+# ---------------------------------------------------------------------------------------
+# Searches
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Budget:
+    limit: int
+    used: int = 0
+
+    @property
+    def spent(self) -> bool:
+        return self.used >= self.limit
+
+
+def _walk_search(
+    cache: EdgeCache, rows: _RowFilter, budget: _Budget, bound: float = math.inf
+) -> tuple[list[int] | None, str]:
+    """A* over directed edges; returns (edge numbers of the shortest walk A..B meeting
+    conditions (1)-(4), "found") or (None, "exhausted" | "cap" | "bound"); "bound" when
+    no such walk is shorter than `bound`."""
+    nodes = cache.nodes
+    pts = nodes.points
+    heuristic = np.hypot(*(pts - pts[GOAL]).T)
+    heap: list[tuple[float, int, float, int]] = []
+    pred: dict[int, int] = {}
+    remaining: dict[int, np.ndarray] = {}
+    left: dict[int, int] = {}  # out-edges of a node not relaxed yet
+    floor = -math.sin(ANGLE_TOLERANCE)
+    tick = 0
+
+    def expand(v: int, edge_in: int, g: float) -> None:
+        nonlocal tick
+        lo, hi = cache.edges(v)
+        rem = remaining.get(v)
+        if rem is None:
+            rem = rows.mask(cache, v).copy()
+            remaining[v] = rem
+            left[v] = int(np.count_nonzero(rem))
+        if left[v] == 0:
+            return
+        if edge_in < 0:
+            allowed = rem
+        else:
+            d_in = cache.direction[edge_in]
+            dirs = cache.direction[lo:hi]
+            allowed = rem & (dirs @ d_in >= floor)
+            if cache.taut and nodes.prunable[v]:
+                allowed &= wraps_corner(
+                    d_in, dirs, cache.side_at_dst[edge_in], cache.side_at_src[lo:hi]
+                )
+        local = np.flatnonzero(allowed)
+        if len(local) == 0:
+            return
+        rem[local] = False
+        left[v] -= len(local)
+        edge = lo + local
+        cost = g + cache.length[edge] + cache.penalty[edge]
+        target = cache.dst[edge]
+        score = cost + heuristic[target]
+        for e, w, c, f in zip(
+            edge.tolist(), target.tolist(), cost.tolist(), score.tolist(), strict=True
+        ):
+            if left.get(w, 1) == 0:
+                continue  # every out-edge of w is already relaxed from a cheaper state
+            pred[e] = edge_in
+            tick += 1
+            heapq.heappush(heap, (f, tick, c, e))
+
+    budget.used += 1
+    expand(START, -1, 0.0)
+    while heap:
+        f, _, g, e = heapq.heappop(heap)
+        if f >= bound:
+            return None, "bound"
+        w = int(cache.dst[e])
+        if w == GOAL:
+            walk = [e]
+            while pred[walk[-1]] >= 0:
+                walk.append(pred[walk[-1]])
+            return walk[::-1], "found"
+        if left.get(w, 1) == 0:
+            continue
+        if budget.spent:
+            return None, "cap"
+        budget.used += 1
+        expand(w, e, g)
+    return None, "exhausted"
+
+
+def _label_search(
+    problem: PathProblem,
+    cache: EdgeCache,
+    rows: _RowFilter,
+    budget: _Budget,
+    bound: float = math.inf,
+) -> tuple[np.ndarray | None, str]:
+    """Repair of conditions (5) and definition 1: enumerate partial walks in order of
+    f = g + h (labels), up to `_LABELS_PER_STATE` per directed edge, extending a label only
+    if the simplified path stays valid. The new (or grown) straight segment must keep 2 rho_c
+    from every earlier segment but its predecessor; (1)-(4) hold by construction. The first
+    label to reach B is the shortest valid path unless some edge ran out of labels
+    (status "found" or "found-capped"); otherwise (None, "exhausted" | "capped" | "cap")."""
+    nodes = cache.nodes
+    pts = nodes.points
+    heuristic = np.hypot(*(pts - pts[GOAL]).T)
+    limit = 2.0 * problem.safety_margin - DISTANCE_TOLERANCE
+    floor = -math.sin(ANGLE_TOLERANCE)
+    # label fields: edge, g, open segment start (node), closed segments (linked tuples)
+    lab_edge: list[int] = []
+    lab_g: list[float] = []
+    lab_open: list[int] = []
+    lab_closed: list[tuple | None] = []
+    heap: list[tuple[float, int]] = []
+    settled: dict[int, int] = {}
+    saturated = False
+
+    def push(edge: np.ndarray, g: np.ndarray, open_start: np.ndarray, closed) -> None:
+        for e, c, o in zip(edge.tolist(), g.tolist(), open_start.tolist(), strict=True):
+            lab_edge.append(e)
+            lab_g.append(c)
+            lab_open.append(o)
+            lab_closed.append(closed)
+            heapq.heappush(heap, (c + float(heuristic[cache.dst[e]]), len(lab_edge) - 1))
+
+    def closed_array(closed) -> np.ndarray:
+        out = []
+        while closed is not None:
+            out.append(closed[:2])
+            closed = closed[2]
+        return np.array(out, np.int64).reshape(-1, 2)
+
+    lo, hi = cache.edges(START)
+    first = lo + np.flatnonzero(rows.mask(cache, START))
+    budget.used += 1
+    push(first, cache.length[first], np.full(len(first), START), None)
+    while heap:
+        f, label = heapq.heappop(heap)
+        if f >= bound:
+            return None, "bound"
+        e = lab_edge[label]
+        v = int(cache.dst[e])
+        if v == GOAL:
+            segs = closed_array(lab_closed[label])[::-1]
+            idx = np.concatenate([segs[:, 0], [lab_open[label], GOAL]]).astype(np.int64)
+            return pts[idx], "found-capped" if saturated else "found"
+        done = settled.get(e, 0)
+        if done >= _LABELS_PER_STATE:
+            saturated = True
+            continue
+        settled[e] = done + 1
+        if budget.spent:
+            return None, "cap"
+        budget.used += 1
+        lo, hi = cache.edges(v)
+        if hi == lo:
+            continue
+        d_in = cache.direction[e]
+        dirs = cache.direction[lo:hi]
+        bend = dirs @ d_in
+        allowed = rows.mask(cache, v) & (bend >= floor)
+        if cache.taut and nodes.prunable[v]:
+            allowed &= wraps_corner(d_in, dirs, cache.side_at_dst[e], cache.side_at_src[lo:hi])
+        local = np.flatnonzero(allowed)
+        if len(local) == 0:
+            continue
+        edge = lo + local
+        cross = d_in[0] * dirs[local, 1] - d_in[1] * dirs[local, 0]
+        straight = (np.abs(cross) <= ANGLE_TOLERANCE) & (bend[local] > 0)
+        start = lab_open[label]
+        seg_start = np.where(straight, start, v)
+        closed = lab_closed[label]
+        ok = np.ones(len(local), bool)
+        segs = closed_array(closed)
+        if len(segs):
+            new = shapely.linestrings(np.stack([pts[seg_start], pts[cache.dst[edge]]], axis=1))
+            old = shapely.linestrings(np.stack([pts[segs[:, 0]], pts[segs[:, 1]]], axis=1))
+            near = shapely.distance(new[:, None], old[None, :]) < limit
+            near[straight, 0] = False  # a grown segment is adjacent to the last closed one
+            ok = ~near.any(axis=1)
+        g = lab_g[label] + cache.length[edge]
+        if np.any(ok & straight):
+            pick = ok & straight
+            push(edge[pick], g[pick], seg_start[pick], closed)
+        if np.any(ok & ~straight):
+            pick = ok & ~straight
+            push(edge[pick], g[pick], seg_start[pick], (start, v, closed))
+    return None, "capped" if saturated else "exhausted"
+
+
+def _node_search(
+    cache: EdgeCache, rows: _RowFilter, budget: _Budget, **relax: bool
+) -> tuple[list[int] | None, str]:
+    """A* over nodes (Dijkstra with the Euclidean heuristic): the paper's penalty loop, and
+    (with the row filter relaxed) the unconstrained shortest path."""
+    pts = cache.nodes.points
+    heuristic = np.hypot(*(pts - pts[GOAL]).T)
+    best = {START: 0.0}
+    pred: dict[int, int] = {START: -1}
+    done: set[int] = set()
+    heap = [(float(heuristic[START]), 0, 0.0, START)]
+    tick = 0
+    while heap:
+        _, _, g, v = heapq.heappop(heap)
+        if v in done:
+            continue
+        if v == GOAL:
+            walk = []
+            while pred[v] >= 0:
+                walk.append(pred[v])
+                v = int(cache.src[pred[v]])
+            return walk[::-1], "found"
+        done.add(v)
+        if budget.spent:
+            return None, "cap"
+        budget.used += 1
+        lo, hi = cache.edges(v)
+        if hi == lo:
+            continue
+        local = np.flatnonzero(rows.mask(cache, v, **relax))
+        edge = lo + local
+        cost = g + cache.length[edge] + cache.penalty[edge]
+        for e, w, c in zip(edge.tolist(), cache.dst[edge].tolist(), cost.tolist(), strict=True):
+            if w in done or c >= best.get(w, math.inf):
+                continue
+            best[w] = c
+            pred[w] = e
+            tick += 1
+            heapq.heappush(heap, (c + float(heuristic[w]), tick, c, w))
+    return None, "exhausted"
+
+
+def _walk_points(cache: EdgeCache, walk: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Points of a walk with straight-through vertices removed, and for each walk edge the
+    index of the simplified segment it belongs to."""
+    pts = cache.nodes.points
+    idx = np.concatenate([[START], cache.dst[np.asarray(walk)]])
+    raw = pts[idx]
+    vec = np.diff(raw, axis=0)
+    cross = vec[:-1, 0] * vec[1:, 1] - vec[:-1, 1] * vec[1:, 0]
+    dot = np.sum(vec[:-1] * vec[1:], axis=1)
+    scale = np.hypot(*vec[:-1].T) * np.hypot(*vec[1:].T)
+    straight = (np.abs(cross) <= ANGLE_TOLERANCE * scale) & (dot > 0)
+    keep = np.concatenate([[True], ~straight, [True]])
+    segment_of_edge = np.cumsum(keep[:-1]) - 1
+    return raw[keep], segment_of_edge
+
+
+def _offences(violations: PathViolations, segments: int) -> np.ndarray:
+    """Eq. 46 with the DESIGN 3.3 errata, per segment: non-adjacent segments closer than
+    2 rho_c, plus adjacent bends over 90 degrees; anything else also counts once."""
+    count = np.zeros(segments)
+    if len(violations.proximity):
+        pair = violations.proximity[:, :2].astype(np.int64)
+        np.add.at(count, pair[:, 0], 1.0)
+        np.add.at(count, pair[:, 1], 1.0)
+    if len(violations.bends):
+        vertex = violations.bends[:, 0].astype(np.int64)
+        np.add.at(count, vertex - 1, 1.0)
+        np.add.at(count, vertex, 1.0)
+    for rows_ in (violations.obstacle, violations.start_row, violations.goal_row):
+        if len(rows_):
+            np.add.at(count, rows_[:, 0].astype(np.int64), 1.0)
+    if violations.departure_angle_deg is not None:
+        count[0] += 1.0
+    if violations.arrival_angle_deg is not None:
+        count[-1] += 1.0
+    if violations.structure and not count.any():
+        count += 1.0
+    return count
+
+
+@dataclass
+class _LevelResult:
+    path: np.ndarray | None
+    rounds: int
+    repairs: int
+    # "found", "exhausted" (no walk at all), "repair" (walks, none valid), "repair-capped"
+    # (none valid within the label limit), "cap" (max_expansions)
+    status: str
+    violations: PathViolations | None = None
+    certified: bool = False
+
+
+def _exact_level(
+    problem: PathProblem,
+    cache: EdgeCache,
+    rows: _RowFilter,
+    budget: _Budget,
+    bound: float = math.inf,
+) -> _LevelResult:
+    """Shortest walk meeting (1)-(4); if it breaks (5) or repeats a point, the label search
+    for the shortest valid path (DESIGN 3.3). With `bound`, only paths shorter than it."""
+    walk, status = _walk_search(cache, rows, budget, bound)
+    if walk is None:
+        return _LevelResult(None, 1, 0, status)
+    path, _ = _walk_points(cache, walk)
+    first = check_path(path, problem, rows.rows)
+    if first.ok:
+        return _LevelResult(path, 1, 0, "found", first)
+    path, status = _label_search(problem, cache, rows, budget, bound)
+    if path is None:
+        status = {"cap": "cap", "capped": "repair-capped", "bound": "bound"}.get(status, "repair")
+        return _LevelResult(None, 2, 1, status, first)
+    final = check_path(path, problem, rows.rows)
+    if not final.ok:  # cannot happen: the label search keeps (1)-(5); never return it
+        return _LevelResult(None, 2, 1, "repair", final)
+    return _LevelResult(path, 2, 1, "found" if status == "found" else "found-capped", final)
+
+
+def _length(path: np.ndarray) -> float:
+    return float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
+
+
+def _penalty_loop(
+    problem: PathProblem, cache: EdgeCache, rows: _RowFilter, budget: _Budget
+) -> _LevelResult:
+    """The paper's Algorithm 1 (done as a real Dijkstra): search, check definition 4,
+    raise the weight of each offending edge by I(P, e) x W (eqs. 43, 46, 47), search again;
+    at most `max_penalty_iterations` rounds."""
+    cache.penalty[: cache.size] = 0.0
+    mean_weight = None
+    last = None
+    for round_ in range(1, problem.max_penalty_iterations + 1):
+        walk, status = _node_search(cache, rows, budget)
+        if walk is None:
+            if round_ == 1 or status == "cap":
+                return _LevelResult(None, round_, round_ - 1, status, last)
+            return _LevelResult(None, round_, round_ - 1, "repair", last)
+        path, segment_of_edge = _walk_points(cache, walk)
+        violations = check_path(path, problem, rows.rows)
+        if violations.ok:
+            return _LevelResult(path, round_, round_ - 1, "found", violations)
+        last = violations
+        if mean_weight is None:
+            mean_weight = float(np.mean(cache.length[: cache.size]))  # W, eq. 43
+        offences = _offences(violations, len(path) - 1)
+        cache.penalty[np.asarray(walk)] += offences[segment_of_edge] * mean_weight
+        if budget.spent:
+            return _LevelResult(None, round_, round_, "cap", last)
+    count = problem.max_penalty_iterations
+    return _LevelResult(None, count, count, "repair", last)
+
+
+# ---------------------------------------------------------------------------------------
+# Diagnosis
+# ---------------------------------------------------------------------------------------
+
+
+def _reaches_goal(cache: EdgeCache, filters: _RowFilter, budget: _Budget, **relax: bool) -> bool:
+    """Whether B can be reached from A over edges, ignoring the bend rule (a breadth-first
+    search over nodes); keyword flags switch parts of the row filter off."""
+    seen = np.zeros(len(cache.nodes), bool)
+    seen[START] = True
+    frontier = [START]
+    while frontier and not seen[GOAL] and not budget.spent:
+        budget.used += len(frontier)
+        found = []
+        for v in frontier:
+            lo, hi = cache.edges(v)
+            dst = cache.dst[lo:hi][filters.mask(cache, v, **relax)]
+            dst = dst[~seen[dst]]
+            seen[dst] = True
+            found.append(dst)
+        frontier = np.concatenate(found).tolist() if found else []
+    return bool(seen[GOAL])
+
+
+def _diagnose(problem: PathProblem, cache: EdgeCache, rows: _RowFilter, budget: _Budget) -> str:
+    """Why the full graph holds no valid path (called after its search failed): relax one
+    constraint at a time and name the one that makes B reachable."""
+    theta_a, theta_b = problem.start_angle_deg, problem.goal_angle_deg
+    if not rows.mask(cache, START, departure=False).any():
+        return (
+            "no straight segment leaves A clear of the obstacles by rho_c and of the row "
+            "beyond B by 2 rho_c: A is boxed in"
+        )
+    if _reaches_goal(cache, rows, budget):
+        return (
+            "every route from A to B needs a bend sharper than 90 degrees (condition 4 of "
+            "definition 4), for example to turn round where no obstacle corner allows it"
+        )
+    departure = _reaches_goal(cache, rows, budget, departure=False)
+    arrival = _reaches_goal(cache, rows, budget, arrival=False)
+    if budget.spent:
+        return _cap_reason(problem)
+    if departure:
+        return (
+            "every route needs a sharp bend at departure: the first segment of every route "
+            f"turns more than 90 degrees from the start row direction (theta_A = {theta_a:g} deg)"
+        )
+    if arrival:
+        return (
+            "every route needs a sharp bend at arrival: the last segment of every route turns "
+            f"more than 90 degrees from the goal row direction (theta_B = {theta_b:g} deg)"
+        )
+    if _reaches_goal(cache, rows, budget, departure=False, arrival=False):
+        return (
+            "every route needs sharp bends at both departure and arrival (more than 90 "
+            f"degrees from the row directions, theta_A = {theta_a:g} deg, "
+            f"theta_B = {theta_b:g} deg)"
+        )
+    if _reaches_goal(cache, rows, budget, departure=False, arrival=False, row_tests=False):
+        return (
+            "the parking rows cut every route: no path keeps 2 rho_c from the row behind A "
+            "and the row beyond B (eq. 35); change theta_A/theta_B or the fleet size"
+        )
+    if budget.spent:
+        return _cap_reason(problem)
+    return (
+        "B is unreachable from A: the obstacles with their rho_c margins leave no corridor "
+        "between them"
+    )
+
+
+_SEPARATED = (
+    "B is unreachable from A: the obstacles with their rho_c margins wall one of them in "
+    "(A and B lie in different parts of the free space)"
+)
+
+
+def _cap_reason(problem: PathProblem) -> str:
+    return (
+        f"the search stopped at its cap of {problem.max_expansions} expansions "
+        "(max_expansions) without finding a valid path"
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# Planner
+# ---------------------------------------------------------------------------------------
+
+
+class _Planner:
+    """Holds the nodes and edge caches of one problem across fleet-size rounds."""
+
+    def __init__(self, problem: PathProblem) -> None:
+        self.problem = problem
+        self.nodes = graph_nodes(problem)
+        self.budget = _Budget(problem.max_expansions)
+        self._caches: dict[str, EdgeCache] = {}
+
+    def cache(self, level: str) -> EdgeCache:
+        if level not in self._caches:
+            self._caches[level] = EdgeCache(
+                self.problem,
+                self.nodes,
+                taut=level == "taut",
+                prune_collinear=level != "penalty",
+                local_candidates={"taut": LOCAL_CANDIDATES, "full": LOCAL_CANDIDATES_FULL}.get(
+                    level
+                ),
+            )
+        return self._caches[level]
+
+    @property
+    def edges_examined(self) -> int:
+        return sum(c.examined for c in self._caches.values())
+
+    @property
+    def candidate_edges(self) -> np.ndarray:
+        found = [c.computed_edges() for c in self._caches.values()]
+        return np.concatenate(found) if found else np.zeros((0, 2, 2))
+
+    def solve(self, rows: ParkingRows) -> tuple[_LevelResult, str, str | None]:
+        """(result, level, reason) for one set of rows."""
+        rows_filter = _RowFilter(self.problem, rows, self.nodes)
+        if self.problem.method == "penalty":
+            result = _penalty_loop(self.problem, self.cache("penalty"), rows_filter, self.budget)
+            if result.path is not None:
+                return result, "penalty", None
+            return result, "penalty", self._why(result, rows_filter, "penalty")
+        taut = _exact_level(self.problem, self.cache("taut"), rows_filter, self.budget)
+        if taut.path is not None:
+            return self._certify(taut, rows_filter)
+        problem = self.problem
+        if taut.status == "exhausted" and problem.obstacles.separated(
+            problem.start, problem.goal, problem.safety_margin - DISTANCE_TOLERANCE
+        ):
+            return taut, "full", _SEPARATED
+        if taut.status != "cap":
+            full = _exact_level(self.problem, self.cache("full"), rows_filter, self.budget)
+            if full.path is not None:
+                full.certified = full.status == "found" and self.cache("full").radius is None
+                return full, "full", None
+            taut = full
+        return taut, "full", self._why(taut, rows_filter, "full")
+
+    def _certify(self, taut: _LevelResult, rows: _RowFilter) -> tuple[_LevelResult, str, None]:
+        """The taut graph holds the shortest path when no constraint binds: its length then
+        equals the unconstrained shortest path (rows, parking angles and bends ignored),
+        which the full graph cannot beat. Otherwise search the full graph for a shorter
+        valid path (A* bounded by the taut length), when the map is small enough. A proof
+        needs complete candidate sets (no radius-limited edges)."""
+        length = _length(taut.path)
+        taut_cache = self.cache("taut")
+        if taut_cache.radius is not None and len(self.nodes) > FULL_CHECK_NODES:
+            return taut, "taut", None  # nothing could be proven on this graph
+        walk, _ = _node_search(
+            taut_cache, rows, self.budget, departure=False, arrival=False, row_tests=False
+        )
+        if walk is not None:
+            free = _length(_walk_points(taut_cache, walk)[0])
+            if length <= free * (1.0 + 1e-12) + DISTANCE_TOLERANCE:
+                taut.certified = taut.status == "found" and taut_cache.radius is None
+                return taut, "taut", None
+        if len(self.nodes) > FULL_CHECK_NODES or self.budget.spent:
+            return taut, "taut", None
+        full_cache = self.cache("full")
+        bound = length - DISTANCE_TOLERANCE
+        full = _exact_level(self.problem, full_cache, rows, self.budget, bound)
+        complete = full_cache.radius is None
+        if full.path is not None:
+            full.certified = full.status == "found" and complete
+            return full, "full", None
+        taut.certified = full.status == "bound" and taut.status == "found" and complete
+        return taut, "taut", None
+
+    def _why(self, result: _LevelResult, rows: _RowFilter, level: str) -> str:
+        if result.status == "cap" or self.budget.spent:
+            return _cap_reason(self.problem)
+        what = result.violations.describe() if result.violations else None
+        if result.status == "repair" and level == "penalty":
+            return (
+                f"the paper's penalty loop found no valid path in {result.rounds} rounds "
+                f"(max_penalty_iterations; last try: {what})"
+            )
+        if result.status == "repair":
+            return (
+                "no valid path exists: every route meeting conditions (1)-(4) of definition 4 "
+                f"comes back within 2 rho_c of itself (condition 5; the shortest: {what})"
+            )
+        if result.status == "repair-capped":
+            return (
+                "no valid path found: the routes meeting conditions (1)-(4) of definition 4 "
+                f"come back within 2 rho_c of themselves (condition 5; the shortest: {what}), "
+                f"and the repair search kept {_LABELS_PER_STATE} partial routes per edge"
+            )
+        return _diagnose(self.problem, self.cache(level), rows, self.budget)
+
+
+def _rows(problem: PathProblem, fleet_size: int) -> ParkingRows:
+    return parking_rows(
+        problem.start,
+        problem.goal,
+        problem.start_angle_deg,
+        problem.goal_angle_deg,
+        fleet_size,
+        problem.safety_margin,
+        problem.parking,
+    )
+
+
+def plan_path(problem: PathProblem) -> PathPlan:
+    """Plan a valid path (definition 4) from A to B, or say why there is none.
+
+    With finite rows ("segment"), N starts at the straight-line bound (or the given fleet
+    size), and the path is planned again while it needs more UAVs than the rows were sized
+    for (N only grows, DESIGN 3.2). `fleet_size` is the N the rows are sized for (at least
+    the requested size), `min_fleet_size` eq. 28 for the path found.
+    """
+    rho, radio = problem.safety_margin, problem.radio_range
+    straight = float(np.hypot(*(problem.goal - problem.start)))
+    reason = precheck(problem)
+    try:
+        lower = min_fleet_size(straight, rho, radio)
+    except ValueError:
+        lower = 1
+    size = max(problem.fleet_size or 1, lower)
+    if reason is not None:
+        return _invalid(problem, reason, size, lower, _rows(problem, size))
+    planner = _Planner(problem)
+    for fleet_round in range(1, MAX_FLEET_ROUNDS + 1):
+        rows = _rows(problem, size)
+        reason = check_rows(problem, rows)
+        if reason is not None:
+            reason = f"the path needs {size} UAVs (eq. 28), and with {size} UAVs {reason}"
+            return _invalid(problem, reason, size, lower, rows, planner, fleet_round)
+        result, level, reason = planner.solve(rows)
+        if result.path is None:
+            if fleet_round > 1 and problem.parking == "segment":
+                reason = (
+                    f"{reason} (with the parking rows sized for the {size} UAVs that the "
+                    "shorter routes need, eq. 28)"
+                )
+            return _invalid(problem, reason, size, lower, rows, planner, fleet_round, result)
+        length = _length(result.path)
+        need = min_fleet_size(length, rho, radio)
+        if need > size and problem.parking == "segment":
+            # Longer rows only remove edges: if this path is still valid with rows for
+            # `need` UAVs, it is still the shortest, and no new search is needed.
+            grown = _rows(problem, need)
+            if check_rows(problem, grown) is None and check_path(result.path, problem, grown).ok:
+                size, rows = need, grown
+        if need <= size or problem.parking == "ray":
+            return PathPlan(
+                valid=True,
+                reason=None,
+                path=result.path,
+                length_m=length,
+                fleet_size=max(size, need),
+                min_fleet_size=need,
+                rows=rows if need <= size else _rows(problem, need),
+                iterations=result.rounds,
+                expansions=planner.budget.used,
+                node_count=len(planner.nodes),
+                edges_examined=planner.edges_examined,
+                candidate_edges=planner.candidate_edges,
+                violations=result.violations,
+                certified=result.certified,
+                level=level,
+                repairs=result.repairs,
+                fleet_rounds=fleet_round,
+                edge_count=sum(c.size for c in planner._caches.values()),
+            )
+        size = need
+    return _invalid(
+        problem,
+        f"the fleet size kept growing with the path for {MAX_FLEET_ROUNDS} rounds",
+        size,
+        lower,
+        _rows(problem, size),
+        planner,
+        MAX_FLEET_ROUNDS,
+    )
+
+
+def _invalid(
+    problem: PathProblem,
+    reason: str,
+    size: int,
+    lower: int,
+    rows: ParkingRows,
+    planner: _Planner | None = None,
+    fleet_round: int = 1,
+    result: _LevelResult | None = None,
+) -> PathPlan:
+    return PathPlan(
+        valid=False,
+        reason=reason,
+        path=np.zeros((0, 2)),
+        length_m=math.nan,
+        fleet_size=size,
+        min_fleet_size=lower,
+        rows=rows,
+        iterations=result.rounds if result else 0,
+        expansions=planner.budget.used if planner else 0,
+        node_count=len(planner.nodes) if planner else 0,
+        edges_examined=planner.edges_examined if planner else 0,
+        candidate_edges=planner.candidate_edges if planner else np.zeros((0, 2, 2)),
+        violations=result.violations if result else None,
+        level="",
+        repairs=result.repairs if result else 0,
+        fleet_rounds=fleet_round,
+    )

@@ -1,0 +1,171 @@
+"""Conformance: the ArduPilot driver against the fake ArduCopter over real UDP on loopback.
+
+The fake reproduces ArduCopter 4.7 SITL as recorded (`tests/fakes/ardupilot.py`); its slow
+boot (position estimate ~40 s) is compressed by the same speedup the driver is told.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from gcs.drivers.base import Phase
+from gcs.geodesy import Origin
+from tests.fakes.ardupilot import GUIDED, LAND, ArduCopterModel
+from tests.fakes.flight import Flight, SinkDriver, home_of, hover, leg
+from tests.fakes.replay import SITL_DIR, drive, load
+
+SPEEDUP = 40.0  # the boot's ~42 s take ~1 s
+ORIGIN = Origin(-35.3632, 149.1652, 584.0)
+SLOT = (25.0, -40.0)
+HOME_UP = 6.0  # the vehicle's home is 6 m above the mission origin
+ALTITUDE = 20.0  # above the origin: 14 m above this home
+RELATIVE = ALTITUDE - HOME_UP
+
+
+def start(model: ArduCopterModel, slot=SLOT) -> Flight:
+    return Flight.start(
+        "ardupilot", model, origin=ORIGIN, slot=slot, altitude=ALTITUDE, speedup=model.speedup
+    )
+
+
+def copter(speedup: float = SPEEDUP, **kwargs) -> ArduCopterModel:
+    kwargs.setdefault("home", home_of(ORIGIN, SLOT, HOME_UP))
+    return ArduCopterModel(speedup=speedup, **kwargs)
+
+
+def commands(flight: Flight, command: int) -> list:
+    return [
+        e for e in flight.fake.received("COMMAND_LONG") + flight.fake.received("COMMAND_INT")
+        if e.message.command == command
+    ]  # fmt: skip
+
+
+def take_off(flight: Flight, timeout: float = 15.0) -> None:
+    flight.follow(hover((*SLOT, ALTITUDE)))
+    flight.driver.takeoff(ALTITUDE, time.monotonic())  # before it is ready: it waits
+    assert flight.run_until(lambda: flight.driver.phase == Phase.FOLLOWING, timeout), (
+        flight.driver.phase,
+        flight.driver.failure_reason,
+    )
+
+
+def test_happy_path_waits_for_the_ekf_then_guided_arm_takeoff_follow_land():
+    model = copter()
+    with start(model) as flight:
+        driver = flight.driver
+        take_off(flight)
+
+        # Streams were asked for: ArduPilot sends nothing else by default.
+        assert {1, 24, 33, 193, 242, 245} <= set(model.intervals)
+        # GUIDED by MAV_CMD_DO_SET_MODE (acknowledged), never by SET_MODE.
+        modes = commands(flight, 176)
+        assert [(m.message.param1, m.message.param2) for m in modes] == [(1, GUIDED)]
+        assert not flight.fake.received("SET_MODE")
+        # No ARM before the EKF used GPS (A1: `Arm: Need Position Estimate` otherwise).
+        arms = commands(flight, 400)
+        estimate_at = model.timeline.position_estimate / model.speedup
+        assert len(arms) == 1 and arms[0].t >= estimate_at
+        # Take-off to the cruise altitude relative to this vehicle's home.
+        (takeoff,) = commands(flight, 22)
+        assert takeoff.message.param7 == pytest.approx(RELATIVE, abs=0.01)
+        assert driver.telemetry.relative_altitude == pytest.approx(RELATIVE, abs=1.0)
+
+        # Follow a 10 m leg north at 5 m/s: frame 6, mask 3520, altitude relative to home.
+        flight.follow(leg((*SLOT, ALTITUDE), (0.0, 5.0, 0.0), 2.0))
+        end = np.array([SLOT[0], SLOT[1] + 10.0])
+
+        def arrived() -> bool:
+            p = driver.telemetry.position_enu
+            return p is not None and np.hypot(*(p[:2] - end)) < 0.5
+
+        assert flight.run_until(arrived, 6.0)
+        targets = flight.fake.received("SET_POSITION_TARGET_GLOBAL_INT")
+        assert targets and all(
+            e.message.coordinate_frame == 6 and e.message.type_mask == 3520 for e in targets
+        )
+        assert all(e.message.alt == pytest.approx(RELATIVE, abs=0.01) for e in targets)
+        # Velocity feed-forward in NED: 5 m/s north.
+        assert max(e.message.vx for e in targets) == pytest.approx(5.0)
+        assert all(e.message.vy == 0.0 and e.message.vz == 0.0 for e in targets)
+
+        driver.land(time.monotonic())
+        assert flight.run_until(lambda: driver.phase == Phase.LANDED, 10.0)
+        assert commands(flight, 176)[-1].message.param2 == LAND
+        assert flight.run_until(lambda: not model.armed, 5.0)  # ArduPilot disarms by itself
+        assert np.hypot(*(driver.telemetry.position_enu[:2] - end)) < 0.5
+        assert driver.link.counters.bad == 0
+
+
+def test_arming_refused_is_reported_and_retried_after_a_back_off():
+    model = copter(extra_arm_refusals=2, speedup=20.0)  # two back-offs within the arming time
+    with start(model) as flight:
+        take_off(flight)
+        refusals = [t for t in flight.texts("command") if t.startswith("arming refused")]
+        assert refusals == ["arming refused: Arm: Need Position Estimate"] * 2
+        arms = commands(flight, 400)
+        assert len(arms) == 3 and model.armed
+        gaps = np.diff([a.t for a in arms])
+        backoff = flight.driver.timing.wall(flight.driver.refusal_backoff_s)
+        assert np.all(gaps >= backoff * 0.9), gaps  # never at the tick rate
+
+
+def test_mode_refused_is_reported_with_the_vehicles_reason():
+    model = copter(known_modes=frozenset({0, 4, 5, 9}))  # built without BRAKE
+    with start(model) as flight:
+        take_off(flight)
+        flight.driver.hold(time.monotonic())
+        refusal = "mode hold refused: No such mode 17"
+        assert flight.run_until(lambda: refusal in flight.texts("command"), 3.0)
+        assert model.mode == GUIDED  # still hovering at its last target
+
+
+def test_home_away_from_its_parking_slot_is_refused_before_arming():
+    model = copter(home=home_of(ORIGIN, (SLOT[0] + 40.0, SLOT[1]), HOME_UP))
+    with start(model) as flight:
+        flight.driver.takeoff(ALTITUDE, time.monotonic())
+        assert flight.run_until(lambda: flight.driver.phase == Phase.FAILED, 10.0)
+        assert flight.driver.failure_reason == "home is 40.0 m from its parking slot (25.0, -40.0)"
+        assert not commands(flight, 400) and not model.armed
+
+
+def test_vehicle_leaving_guided_by_itself_is_a_failsafe_event():
+    model = copter()
+    with start(model) as flight:
+        take_off(flight)
+        with flight.fake.lock:
+            model.change_mode_by_itself(LAND, flight.fake.now())  # e.g. a GCS failsafe
+        assert flight.run_until(lambda: flight.driver.phase == Phase.LANDING, 3.0)
+        assert flight.texts("failsafe") == ["the vehicle left guided flight by itself: mode LAND"]
+
+
+@pytest.mark.skipif(not SITL_DIR.is_dir(), reason=f"SITL transcripts not found in {SITL_DIR}")
+def test_recorded_ardupilot_session_drives_the_state_machine():
+    """A1 as recorded (ArduCopter SITL's own messages, re-encoded) into the driver: it is ready
+    only once the EKF uses GPS and the pre-arm bit agrees (42.59), follows the recorded arming
+    and climb, and takes the LAND the recorder commanded at 77.08 for a mode change of the
+    vehicle's own (a failsafe, from the driver's point of view)."""
+    records = load("ardupilot-session.jsonl")
+    origin = Origin(-35.363261, 149.1652299, 584.09)  # the recorded home
+    with SinkDriver.start("ardupilot", 1, origin, (0.0, 0.0), 20.0) as bench:
+        driver = bench.driver
+        drive(driver, records, 110.0, step=0.004, actions={1.0: lambda t: driver.takeoff(20, t)})
+        events = driver.drain_events()
+        phases = [(e.time, e.text.split(" -> ")[1].split()[0]) for e in events if e.kind == "phase"]
+        assert [p for _, p in phases] == [
+            "initialising", "ready", "arming", "taking_off", "following", "landing", "landed"
+        ]  # fmt: skip
+        at = {p: t for t, p in phases}
+        # EKF_STATUS_REPORT uses GPS at 41.59; in GUIDED the pre-arm bit follows at 42.59.
+        assert 42.59 <= at["ready"] < 42.7
+        assert 42.94 <= at["taking_off"] < 43.0  # HEARTBEAT armed at 42.94
+        assert 55.0 <= at["following"] < 57.5  # 19 m reached
+        assert 77.08 <= at["landing"] < 77.2  # HEARTBEAT LAND at 77.08
+        assert 107.0 <= at["landed"] < 108.0  # landed_state 1 at 107.10
+        texts = [e.text for e in events if e.kind in ("failsafe", "statustext")]
+        assert "the vehicle left guided flight by itself: mode LAND" in texts
+        assert "Arm: Need Position Estimate" in texts
+        arms = bench.commands(400)
+        assert arms and arms[0][0] >= 42.59  # never before the pre-arm bit in GUIDED

@@ -1,0 +1,110 @@
+"""Run-time monitors, the mission clock and the vehicle clock (pure parts of the runtime)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gcs.monitors import LinkMonitor, SafetyMonitor
+from gcs.runtime import MissionClock, VehicleClock
+from planner.obstacles import Obstacles
+
+BOX = np.array([[10.0, -5.0], [20.0, -5.0], [20.0, 5.0], [10.0, 5.0]])
+
+
+def monitor(size: int = 3) -> SafetyMonitor:
+    return SafetyMonitor(
+        fleet_size=size,
+        obstacles=Obstacles(polygons=(BOX,)),
+        base_stations=np.array([[0.0, 0.0]]),
+        radio_range=50.0,
+        safety_margin=5.0,
+        vehicle_radius=0.5,
+    )
+
+
+def test_distances_warn_below_the_margins_and_fail_on_contact():
+    safety = monitor()
+    far = np.array([[0.0, 0.0], [0.0, 20.0], [0.0, 40.0]])
+    assert safety.positions(0.0, far) == []
+    assert safety.stats.connected_fraction == 1.0
+
+    near = np.array([[0.0, 0.0], [0.0, 8.0], [23.0, 0.0]])  # 8 m apart, 3 m from the box
+    kinds = sorted(e.kind for e in safety.positions(1.0, near))
+    assert kinds == ["near_obstacle", "near_uav"]
+    assert all(not e.fatal for e in safety.positions(1.0, near))
+    assert safety.positions(1.1, near) == []  # reported when it starts, not at every sample
+
+    crash = np.array([[0.0, 0.0], [0.0, 0.6], [10.2, 0.0]])  # 0.6 m apart, inside the box
+    events = {e.kind: e for e in safety.positions(2.0, crash)}
+    assert events["collision_uav"].fatal and "UAVs 1 and 2" in events["collision_uav"].text
+    assert events["collision_obstacle"].fatal
+    assert safety.stats.min_uav_uav_m == pytest.approx(0.6)
+    assert safety.stats.min_uav_obstacle_m == 0.0
+
+    safety.positions(3.0, far)  # cleared ...
+    again = safety.positions(4.0, crash)  # ... and reported again
+    assert {e.kind for e in again} >= {"collision_uav", "collision_obstacle"}
+
+
+def test_unknown_positions_do_not_count_as_connected_samples():
+    safety = monitor()
+    partly = np.array([[0.0, 0.0], [np.nan, np.nan], [0.0, 40.0]])
+    safety.positions(0.0, partly)
+    assert safety.stats.samples == 0
+    cut_off = np.array([[0.0, 0.0], [0.0, 20.0], [0.0, 200.0]])
+    safety.positions(1.0, cut_off)
+    assert safety.stats.connected_fraction == 0.0
+
+
+def test_tracking_error_at_the_margin_is_fatal():
+    safety = monitor()
+    events = safety.tracking(1.0, np.array([0, 2]), np.array([1.0, 5.0]), np.array([0.5, 4.0]))
+    assert [(e.uav, e.fatal) for e in events] == [(3, True)]
+    assert safety.stats.max_tracking_error_m.tolist() == [1.0, 0.0, 5.0]
+    assert safety.stats.max_control_error_m.tolist() == [0.5, 0.0, 4.0]
+
+
+def test_link_lost_back_and_a_vehicle_known_gone():
+    links = LinkMonitor(2, link_timeout_s=3.0)
+    assert links.check(0.0, np.array([0.1, 0.1]), 0.3) == []
+    (lost,) = links.check(1.0, np.array([0.1, 0.5]), 0.3)
+    assert (lost.kind, lost.uav, lost.fatal) == ("link_lost", 2, True)
+    (back,) = links.check(2.0, np.array([0.1, 0.0]), 0.3)
+    assert (back.kind, back.uav) == ("link_back", 2)
+    (gone,) = links.mark_lost(3.0, 0, "its process exited", silent_s=0.05)
+    assert gone.uav == 1 and gone.fatal
+    assert links.check(3.1, np.array([0.15, 0.0]), 0.3) == []  # still lost: no new message
+    assert links.lost[0]
+    (back,) = links.check(3.2, np.array([0.01, 0.0]), 0.3)  # a message arrived again
+    assert back.uav == 1 and links.ever_lost.tolist() == [True, True]
+
+
+def test_mission_clock_speedup_and_log_time():
+    wall = [50.0]
+    clock = MissionClock(4.0, monotonic=lambda: wall[0], unix_ns=lambda: 1_000 * 10**9)
+    assert not clock.anchored
+    clock.anchor(50.0, -8.0)
+    assert clock.mission_time(52.0) == pytest.approx(0.0)
+    assert clock.wall_at(4.0) == pytest.approx(53.0)
+    assert clock.log_time_ns(52.0) == 1_000 * 10**9 + 2 * 10**9  # Unix time at mission 0
+    assert clock.log_time_ns(53.0) - clock.log_time_ns(52.0) == 4 * 10**9
+
+
+@settings(max_examples=50, derandomize=True, deadline=None)
+@given(
+    st.floats(0, 1000),
+    st.lists(st.floats(0, 0.5), min_size=5, max_size=60),
+)
+def test_vehicle_clock_recovers_sample_times_from_delayed_receipts(offset, delays):
+    """Samples every 0.1 s of vehicle time, received late by `delays`: the mapped times are
+    never later than the true ones by more than the smallest delay seen so far."""
+    clock = VehicleClock(window=100)
+    smallest = float("inf")
+    for k, delay in enumerate(delays):
+        vehicle = 0.1 * k
+        smallest = min(smallest, delay)
+        mapped = clock.mission_time(vehicle, offset + vehicle + delay)
+        assert offset + vehicle - 1e-9 <= mapped <= offset + vehicle + smallest + 1e-9

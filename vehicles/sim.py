@@ -1,0 +1,238 @@
+"""Many simulated vehicles in one process: sockets, the simulated clock and the main loop.
+
+The simulated clock runs ``speedup`` times faster than the wall clock. The dynamics of every
+vehicle of the process advance together (vectorised) in fixed steps; the autopilots run at the
+control rate; at each wake-up the loop integrates as many steps as the wall clock asks for, so a
+high speedup costs no more wake-ups than real time. If the process falls more than
+``max_lag_s`` (wall clock) behind, the simulated clock slips instead of racing to catch up.
+"""
+
+from __future__ import annotations
+
+import logging
+import selectors
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vehicles.autopilot import Autopilot, AutopilotConfig, Stamp
+from vehicles.dynamics import DynamicsConfig, FleetDynamics
+from vehicles.fleet_speed import LeaderRequest
+from vehicles.frames import GeodeticOrigin
+from vehicles.link import Address, VehicleLink
+from vehicles.telemetry import NEEDS_ESTIMATED_GEODETIC, NEEDS_TRUE_GEODETIC, FleetSnapshot
+
+log = logging.getLogger(__name__)
+
+DEFAULT_ORIGIN = GeodeticOrigin(45.7640, 4.8357, 170.0)
+_EPOLL_RESOLUTION_S = 0.001
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    """One vehicle: its system id, UDP port and start position (local ENU metres)."""
+
+    sysid: int
+    port: int
+    start_enu: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """A process worth of vehicles and how to run them."""
+
+    vehicles: tuple[VehicleSpec, ...]
+    host: str = "127.0.0.1"
+    out: Address | None = None
+    speedup: float = 1.0
+    seed: int = 0
+    origin: GeodeticOrigin = DEFAULT_ORIGIN
+    dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
+    autopilot: AutopilotConfig = field(default_factory=AutopilotConfig)
+    leader_sysid: int | None = None
+    leader_requests: tuple[LeaderRequest, ...] = ()
+    control_rate_hz: float = 50.0
+    max_lag_s: float = 1.0
+    signing_key: bytes | None = None
+
+
+@dataclass(frozen=True)
+class _Arrival:
+    stamp: Stamp
+    vehicle: int
+    message: object
+
+
+@dataclass
+class SimStats:
+    wall_s: float = 0.0
+    sim_s: float = 0.0
+    slipped_sim_s: float = 0.0
+    wakeups: int = 0
+
+
+class Simulation:
+    """Binds every vehicle's socket at construction (a port in use raises PortInUseError)."""
+
+    def __init__(self, config: SimConfig) -> None:
+        self.config = config
+        self.links: list[VehicleLink] = []
+        try:
+            for spec in config.vehicles:
+                self.links.append(
+                    VehicleLink(spec.sysid, config.host, spec.port, config.out, config.signing_key)
+                )
+        except OSError:
+            self.close()
+            raise
+        starts = np.array([spec.start_enu for spec in config.vehicles], dtype=float).reshape(-1, 3)
+        seeds = [(config.seed, spec.sysid) for spec in config.vehicles]
+        self.dynamics = FleetDynamics(config.dynamics, starts, seeds)
+        count = len(config.vehicles)
+        self.autopilots = [
+            Autopilot(
+                sysid=spec.sysid,
+                index=k,
+                count=count,
+                config=config.autopilot,
+                dynamics=self.dynamics,
+                origin=config.origin,
+                leader_requests=config.leader_requests if spec.sysid == config.leader_sysid else (),
+            )
+            for k, spec in enumerate(config.vehicles)
+        ]
+        self.stats = SimStats()
+        self._selector = selectors.DefaultSelector()
+        for k, link in enumerate(self.links):
+            self._selector.register(link.socket, selectors.EVENT_READ, k)
+        step_s = config.dynamics.step_s
+        self._steps_per_tick = max(1, round(1.0 / (config.control_rate_hz * step_s)))
+        self._steps = 0
+        self._wall0 = 0.0
+
+    def close(self) -> None:
+        for link in self.links:
+            link.close()
+        if hasattr(self, "_selector"):
+            self._selector.close()
+
+    def sim_time(self) -> float:
+        return self._steps * self.config.dynamics.step_s
+
+    def _sim_now(self, wall: float) -> float:
+        """The exact simulated time at wall-clock ``wall`` (between steps)."""
+        return (wall - self._wall0) * self.config.speedup
+
+    def run(self, should_stop: Callable[[], bool]) -> SimStats:
+        """Run until ``should_stop()`` is true (checked at every wake-up)."""
+        cfg = self.config
+        step_s = cfg.dynamics.step_s
+        tick_s = self._steps_per_tick * step_s
+        max_lag_steps = max(self._steps_per_tick, int(cfg.max_lag_s * cfg.speedup / step_s))
+        start = time.monotonic()
+        self._wall0 = start - self.sim_time() / cfg.speedup
+        while not should_stop():
+            self.stats.wakeups += 1
+            now = time.monotonic()
+            due = int(self._sim_now(now) / step_s)
+            if due - self._steps > max_lag_steps:
+                self._slip(due - self._steps - max_lag_steps, now)
+                due = self._steps + max_lag_steps
+            self._advance(due, self._receive())
+            next_tick = (self._steps // self._steps_per_tick + 1) * tick_s
+            wait = self._wall0 + next_tick / cfg.speedup - time.monotonic()
+            if wait > _EPOLL_RESOLUTION_S:  # epoll rounds up to whole milliseconds
+                self._selector.select(wait - _EPOLL_RESOLUTION_S)
+            elif wait > 0:
+                time.sleep(wait)  # datagrams keep their kernel arrival time meanwhile
+        self.stats.wall_s = time.monotonic() - start
+        self.stats.sim_s = self.sim_time()
+        return self.stats
+
+    def _slip(self, steps: int, now: float) -> None:
+        """Give up catching up ``steps`` steps: the simulated clock slips (and says so)."""
+        cfg = self.config
+        seconds = steps * cfg.dynamics.step_s
+        self._wall0 += seconds / cfg.speedup
+        self.stats.slipped_sim_s += seconds
+        log.warning("simulation %.2f s behind: the simulated clock slips", seconds)
+        stamp = Stamp(self.sim_time(), now)
+        for autopilot in self.autopilots:
+            autopilot.clock_slipped(seconds, stamp)
+
+    def _advance(self, due_steps: int, arrivals: list[_Arrival]) -> None:
+        """Integrate up to ``due_steps``, running the autopilots at every control tick and
+        handing each message to its autopilot when the simulated clock reaches its arrival
+        (so a process that was late to read its sockets still applies them in order)."""
+        per_tick = self._steps_per_tick
+        step_s = self.config.dynamics.step_s
+        pending = 0
+        while True:
+            now_s = self.sim_time()
+            while pending < len(arrivals) and arrivals[pending].stamp.sim_s <= now_s + 1e-9:
+                self._deliver(arrivals[pending])
+                pending += 1
+            if self._steps >= due_steps:
+                break
+            chunk = min(per_tick - self._steps % per_tick, due_steps - self._steps)
+            if pending < len(arrivals):
+                until = int((arrivals[pending].stamp.sim_s - now_s) / step_s) + 1
+                chunk = max(1, min(chunk, until))
+            self.dynamics.step(chunk)
+            self._steps += chunk
+            if self._steps % per_tick == 0:
+                self._tick(Stamp(self.sim_time(), time.monotonic()))
+        for arrival in arrivals[pending:]:  # arrived during the current step
+            self._deliver(arrival)
+        for autopilot, link in zip(self.autopilots, self.links, strict=True):
+            self._flush(autopilot, link)
+
+    def _tick(self, stamp: Stamp) -> None:
+        """Run every autopilot, then build and send the telemetry that is due."""
+        due_lists = []
+        estimated: list[int] = []
+        true: list[int] = []
+        for k, (autopilot, link) in enumerate(zip(self.autopilots, self.links, strict=True)):
+            autopilot.comm_errors = link.stats.bad_datagrams
+            autopilot.update(stamp)
+            due = autopilot.telemetry.due(stamp.sim_s)
+            due_lists.append(due)
+            if due:
+                if not NEEDS_ESTIMATED_GEODETIC.isdisjoint(due):
+                    estimated.append(k)
+                if not NEEDS_TRUE_GEODETIC.isdisjoint(due):
+                    true.append(k)
+        snapshot = FleetSnapshot(self.dynamics, self.config.origin)
+        snapshot.prefetch(estimated, true)
+        for autopilot, link, due in zip(self.autopilots, self.links, due_lists, strict=True):
+            for msg_id in due:
+                autopilot.emit(msg_id, snapshot, stamp)
+            self._flush(autopilot, link)
+
+    def _receive(self) -> list[_Arrival]:
+        """Every waiting message of every vehicle, stamped with its arrival, in arrival order."""
+        arrivals: list[_Arrival] = []
+        for key, _ in self._selector.select(0):
+            k = key.data
+            for message, arrival in self.links[k].receive():
+                arrivals.append(_Arrival(Stamp(self._sim_now(arrival), arrival), k, message))
+        arrivals.sort(key=lambda a: a.stamp.wall_s)
+        return arrivals
+
+    def _deliver(self, arrival: _Arrival) -> None:
+        autopilot = self.autopilots[arrival.vehicle]
+        try:
+            autopilot.handle(arrival.message, arrival.stamp)
+        except Exception:  # a message must never take the vehicle down
+            log.exception(
+                "sysid %d: error handling %s", autopilot.sysid, arrival.message.get_type()
+            )
+
+    @staticmethod
+    def _flush(autopilot: Autopilot, link: VehicleLink) -> None:
+        if autopilot.outbox:
+            for message in autopilot.outbox:
+                link.send(message)
+            autopilot.outbox.clear()

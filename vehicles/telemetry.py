@@ -1,0 +1,521 @@
+"""Telemetry of one simulated vehicle: what it streams, how often, and the message contents.
+
+Each message builder reads an :class:`~vehicles.autopilot.Autopilot` and a per-tick
+:class:`FleetSnapshot` and returns a pymavlink message (ArduCopter field conventions: NED
+velocities in cm/s, altitudes in mm, angles in centidegrees). Rates are in simulated time and
+can be changed with ``MAV_CMD_SET_MESSAGE_INTERVAL`` (no I/O here: the sim sends).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from vehicles.dynamics import GRAVITY_MPS2, FleetDynamics
+from vehicles.frames import GeodeticOrigin
+
+if TYPE_CHECKING:
+    from vehicles.autopilot import Autopilot, Stamp
+
+MAX_MESSAGE_RATE_HZ = 50.0
+UINT16_MAX = 65535
+INT16_MAX = 32767
+FLIGHT_SW_VERSION = 0x040500FF  # reported as ArduCopter 4.5.0 (official) for GCS compatibility
+CAPABILITIES = (
+    mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+)
+SENSORS = (
+    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+    | mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+    | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    | mavlink.MAV_SYS_STATUS_AHRS
+    | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+    | mavlink.MAV_SYS_STATUS_PREARM_CHECK
+)
+
+
+@dataclass(frozen=True)
+class TelemetryRates:
+    """Default stream rates in Hz of simulated time (0: only on request)."""
+
+    position_hz: float = 10.0  # GLOBAL_POSITION_INT, LOCAL_POSITION_NED
+    attitude_hz: float = 10.0  # ATTITUDE
+    truth_hz: float = 10.0  # SIM_STATE: the true (noise-free) state, for the GCS's metrics
+    status_hz: float = 1.0  # SYS_STATUS, BATTERY_STATUS, EXTENDED_SYS_STATE, VFR_HUD
+    home_hz: float = 0.2  # HOME_POSITION (also sent on arming and on request)
+
+    def intervals(self) -> dict[int, float]:
+        """Default interval in simulated seconds per message id (0: off)."""
+
+        def every(hz: float) -> float:
+            return 1.0 / min(hz, MAX_MESSAGE_RATE_HZ) if hz > 0 else 0.0
+
+        return {
+            mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+            mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: every(self.position_hz),
+            mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: every(self.position_hz),
+            mavlink.MAVLINK_MSG_ID_ATTITUDE: every(self.attitude_hz),
+            mavlink.MAVLINK_MSG_ID_SIM_STATE: every(self.truth_hz),
+            mavlink.MAVLINK_MSG_ID_SYS_STATUS: every(self.status_hz),
+            mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: every(self.status_hz),
+            mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: every(self.status_hz),
+            mavlink.MAVLINK_MSG_ID_VFR_HUD: every(self.status_hz),
+            mavlink.MAVLINK_MSG_ID_HOME_POSITION: every(self.home_hz),
+            mavlink.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: 1.0,  # FLEET_SPD, once known
+            mavlink.MAVLINK_MSG_ID_NAMED_VALUE_INT: 1.0,  # MSN_TIME, once synchronised
+            mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: 0.0,
+            mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 0.0,
+            mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: 0.0,
+        }
+
+
+def phase_of(index: int, count: int) -> float:
+    """Fraction of an interval by which vehicle ``index`` is offset: large fleets send in
+    up to 5 staggered groups (smaller bursts), small ones together (fewer conversions)."""
+    groups = min(5, max(1, count // 20))
+    return (index % groups) / groups
+
+
+class TelemetrySchedule:
+    """Per-message intervals and next due times of one vehicle, in simulated seconds."""
+
+    def __init__(self, defaults: dict[int, float], phase: float) -> None:
+        self._defaults = dict(defaults)
+        self._intervals = dict(defaults)
+        self._phase = phase % 1.0
+        self._due = {msg_id: self._phase * every for msg_id, every in defaults.items() if every > 0}
+        self._next = min(self._due.values(), default=float("inf"))
+
+    def knows(self, msg_id: int) -> bool:
+        return msg_id in self._defaults
+
+    def interval(self, msg_id: int) -> float:
+        return self._intervals.get(msg_id, 0.0)
+
+    def set_interval(self, msg_id: int, interval_s: float | None, now_s: float) -> None:
+        """None: back to the default; 0: off; otherwise every ``interval_s`` (rate-capped)."""
+        every = self._defaults[msg_id] if interval_s is None else interval_s
+        if every > 0:
+            every = max(every, 1.0 / MAX_MESSAGE_RATE_HZ)
+            self._due[msg_id] = now_s + self._phase * every
+        else:
+            self._due.pop(msg_id, None)
+        self._intervals[msg_id] = every
+        self._next = min(self._due.values(), default=float("inf"))
+
+    def due(self, now_s: float) -> list[int]:
+        """Message ids due at ``now_s``; their next due time moves on by one interval."""
+        if now_s + 1e-9 < self._next:
+            return []
+        out = []
+        for msg_id, when in self._due.items():
+            if now_s + 1e-9 >= when:
+                out.append(msg_id)
+                every = self._intervals[msg_id]
+                nxt = when + every
+                self._due[msg_id] = nxt if nxt > now_s else now_s + every
+        self._next = min(self._due.values())
+        return out
+
+
+class FleetSnapshot:
+    """Geodetic positions at one control tick, computed once per vehicle and on demand.
+
+    The sim calls :meth:`prefetch` with the vehicles whose due messages need them, so the
+    conversion runs vectorised once per tick; anything else is converted one by one.
+    """
+
+    def __init__(self, dynamics: FleetDynamics, origin: GeodeticOrigin) -> None:
+        self.dynamics = dynamics
+        self.origin = origin
+        self._estimated: dict[int, tuple[float, float, float]] = {}
+        self._true: dict[int, tuple[float, float, float]] = {}
+
+    def prefetch(self, estimated: list[int], true: list[int]) -> None:
+        """Convert the listed vehicles' estimated and true positions in one vectorised call."""
+        if not estimated and not true:
+            return
+        dyn = self.dynamics
+        enu = np.concatenate(
+            [dyn.position[estimated] + dyn.navigation_error[estimated], dyn.position[true]]
+        )
+        lat, lon, alt = self.origin.to_geodetic(enu)
+        points = list(zip(lat.tolist(), lon.tolist(), alt.tolist(), strict=True))
+        self._estimated.update(zip(estimated, points[: len(estimated)], strict=True))
+        self._true.update(zip(true, points[len(estimated) :], strict=True))
+
+    def estimated(self, index: int) -> np.ndarray:
+        return self.dynamics.estimated(index)
+
+    def estimated_geodetic(self, index: int) -> tuple[float, float, float]:
+        if index not in self._estimated:
+            self.prefetch([index], [])
+        return self._estimated[index]
+
+    def true_geodetic(self, index: int) -> tuple[float, float, float]:
+        if index not in self._true:
+            self.prefetch([], [index])
+        return self._true[index]
+
+
+def _boot_ms(stamp: Stamp) -> int:
+    return int(stamp.sim_s * 1000.0) & 0xFFFFFFFF
+
+
+def _deg_e7(value: float) -> int:
+    return int(round(value * 1e7))
+
+
+def _clamp_int(value: float, low: int, high: int) -> int:
+    if not math.isfinite(value):
+        return 0
+    return int(max(low, min(high, round(value))))
+
+
+def attitude_of(ap: Autopilot) -> tuple[float, float, float]:
+    """Roll, pitch (rad) that produce the vehicle's thrust acceleration, and its yaw (NED)."""
+    dyn = ap.dynamics
+    i = ap.index
+    acc = dyn.thrust_acceleration[i]
+    yaw = float(dyn.yaw[i])
+    up = float(acc[2]) + GRAVITY_MPS2
+    forward = float(acc[0]) * math.sin(yaw) + float(acc[1]) * math.cos(yaw)
+    right = float(acc[0]) * math.cos(yaw) - float(acc[1]) * math.sin(yaw)
+    pitch = -math.atan2(forward, up)
+    roll = math.atan2(right, math.hypot(forward, up))
+    return roll, pitch, yaw
+
+
+def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+
+
+def heartbeat(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_heartbeat_message(
+        mavlink.MAV_TYPE_QUADROTOR,
+        mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        ap.base_mode(stamp),
+        ap.mode,
+        ap.system_status(stamp),
+        3,
+    )
+
+
+def sys_status(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    battery = ap.battery()
+    health = SENSORS if ap.prearm_ok(stamp) else SENSORS & ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    return mavlink.MAVLink_sys_status_message(
+        SENSORS,
+        SENSORS,
+        health,
+        0,
+        _clamp_int(battery.voltage_v * 1000, 0, UINT16_MAX - 1),
+        _clamp_int(battery.current_a * 100, 0, INT16_MAX),
+        _clamp_int(battery.remaining_fraction * 100, 0, 100),
+        0,
+        min(ap.comm_errors, UINT16_MAX),
+        0,
+        0,
+        0,
+        0,
+    )
+
+
+def battery_status(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    battery = ap.battery()
+    voltages = [_clamp_int(battery.voltage_v * 1000, 0, UINT16_MAX - 1)] + [UINT16_MAX] * 9
+    remaining = battery.remaining_fraction
+    charge_state = (
+        mavlink.MAV_BATTERY_CHARGE_STATE_OK
+        if remaining > 0.3
+        else mavlink.MAV_BATTERY_CHARGE_STATE_LOW
+        if remaining > 0.15
+        else mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL
+    )
+    return mavlink.MAVLink_battery_status_message(
+        0,
+        mavlink.MAV_BATTERY_FUNCTION_ALL,
+        mavlink.MAV_BATTERY_TYPE_LIPO,
+        INT16_MAX,
+        voltages,
+        _clamp_int(battery.current_a * 100, 0, INT16_MAX),
+        _clamp_int(battery.consumed_mah, 0, 2**31 - 1),
+        _clamp_int(battery.consumed_j / 100.0, 0, 2**31 - 1),
+        _clamp_int(remaining * 100, 0, 100),
+        _clamp_int(battery.time_remaining_s, 0, 2**31 - 1),
+        charge_state,
+    )
+
+
+def global_position_int(
+    ap: Autopilot, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    i = ap.index
+    lat, lon, alt = snap.estimated_geodetic(i)
+    est = snap.estimated(i)
+    vel = ap.dynamics.velocity[i]
+    heading = math.degrees(float(ap.dynamics.yaw[i])) % 360.0
+    return mavlink.MAVLink_global_position_int_message(
+        _boot_ms(stamp),
+        _deg_e7(lat),
+        _deg_e7(lon),
+        _clamp_int(alt * 1000, -(2**31), 2**31 - 1),
+        _clamp_int((float(est[2]) - ap.home_enu[2]) * 1000, -(2**31), 2**31 - 1),
+        _clamp_int(float(vel[1]) * 100, -32768, 32767),
+        _clamp_int(float(vel[0]) * 100, -32768, 32767),
+        _clamp_int(-float(vel[2]) * 100, -32768, 32767),
+        _clamp_int(heading * 100, 0, 35999),
+    )
+
+
+def local_position_ned(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    i = ap.index
+    rel = snap.estimated(i) - ap.ekf_origin_enu
+    vel = ap.dynamics.velocity[i]
+    return mavlink.MAVLink_local_position_ned_message(
+        _boot_ms(stamp),
+        float(rel[1]),
+        float(rel[0]),
+        -float(rel[2]),
+        float(vel[1]),
+        float(vel[0]),
+        -float(vel[2]),
+    )
+
+
+def attitude(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    roll, pitch, yaw = attitude_of(ap)
+    rates = ap.attitude_rates(roll, pitch, yaw, stamp)
+    return mavlink.MAVLink_attitude_message(_boot_ms(stamp), roll, pitch, yaw, *rates)
+
+
+def sim_state(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    i = ap.index
+    lat, lon, alt = snap.true_geodetic(i)
+    roll, pitch, yaw = attitude_of(ap)
+    acc = ap.dynamics.thrust_acceleration[i]
+    vel = ap.dynamics.velocity[i]
+    dist = ap.dynamics.config.disturbances
+    return mavlink.MAVLink_sim_state_message(
+        *_quaternion(roll, pitch, yaw),
+        roll,
+        pitch,
+        yaw,
+        float(acc[1]),
+        float(acc[0]),
+        -float(acc[2]) - GRAVITY_MPS2,
+        0.0,
+        0.0,
+        0.0,
+        lat,
+        lon,
+        alt,
+        dist.navigation_sigma_m,
+        dist.navigation_sigma_vertical_m,
+        float(vel[1]),
+        float(vel[0]),
+        -float(vel[2]),
+        _deg_e7(lat),
+        _deg_e7(lon),
+    )
+
+
+def extended_sys_state(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_extended_sys_state_message(mavlink.MAV_VTOL_STATE_MC, ap.landed_state())
+
+
+def vfr_hud(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    i = ap.index
+    dyn = ap.dynamics
+    vel = dyn.velocity[i]
+    air = vel - dyn.wind[i]
+    _, _, alt = snap.estimated_geodetic(i)
+    throttle = 0.0
+    if dyn.motors_on[i]:
+        throttle = 50.0 * (float(dyn.thrust_acceleration[i][2]) + GRAVITY_MPS2) / GRAVITY_MPS2
+    return mavlink.MAVLink_vfr_hud_message(
+        float(np.hypot(air[0], air[1])),
+        float(np.hypot(vel[0], vel[1])),
+        _clamp_int(math.degrees(float(dyn.yaw[i])) % 360.0, 0, 359),
+        _clamp_int(throttle, 0, 100),
+        alt,
+        float(vel[2]),
+    )
+
+
+def home_position(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    lat, lon, alt = ap.origin.to_geodetic(ap.home_enu)
+    rel = ap.home_enu - ap.ekf_origin_enu
+    return mavlink.MAVLink_home_position_message(
+        _deg_e7(float(lat[0])),
+        _deg_e7(float(lon[0])),
+        _clamp_int(float(alt[0]) * 1000, -(2**31), 2**31 - 1),
+        float(rel[1]),
+        float(rel[0]),
+        -float(rel[2]),
+        [1.0, 0.0, 0.0, 0.0],
+        0.0,
+        0.0,
+        0.0,
+        int(stamp.sim_s * 1e6),
+    )
+
+
+def gps_global_origin(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    lat, lon, alt = ap.origin.to_geodetic(ap.ekf_origin_enu)
+    return mavlink.MAVLink_gps_global_origin_message(
+        _deg_e7(float(lat[0])),
+        _deg_e7(float(lon[0])),
+        _clamp_int(float(alt[0]) * 1000, -(2**31), 2**31 - 1),
+        int(stamp.sim_s * 1e6),
+    )
+
+
+def gps_raw_int(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    i = ap.index
+    lat, lon, alt = snap.estimated_geodetic(i)
+    vel = ap.dynamics.velocity[i]
+    dist = ap.dynamics.config.disturbances
+    course = math.degrees(math.atan2(float(vel[0]), float(vel[1]))) % 360.0
+    return mavlink.MAVLink_gps_raw_int_message(
+        int(stamp.sim_s * 1e6),
+        mavlink.GPS_FIX_TYPE_3D_FIX,
+        _deg_e7(lat),
+        _deg_e7(lon),
+        _clamp_int(alt * 1000, -(2**31), 2**31 - 1),
+        80,
+        120,
+        _clamp_int(float(np.hypot(vel[0], vel[1])) * 100, 0, UINT16_MAX - 1),
+        _clamp_int(course * 100, 0, 35999),
+        12,
+        _clamp_int(alt * 1000, -(2**31), 2**31 - 1),
+        _clamp_int(dist.navigation_sigma_m * 1000, 0, 2**31 - 1),
+        _clamp_int(dist.navigation_sigma_vertical_m * 1000, 0, 2**31 - 1),
+        100,
+        0,
+        0,
+    )
+
+
+def position_target_local_ned(
+    ap: Autopilot, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    i = ap.index
+    dyn = ap.dynamics
+    pos, vel, acc = dyn.reference_now(i)
+    rel = pos - ap.ekf_origin_enu
+    mask = 0b110000000000  # yaw and yaw rate not reported
+    if not dyn.use_position[i]:
+        mask |= 0b111
+    if not dyn.use_velocity[i]:
+        mask |= 0b111000
+    if not dyn.use_acceleration[i]:
+        mask |= 0b111000000
+    return mavlink.MAVLink_position_target_local_ned_message(
+        _boot_ms(stamp),
+        mavlink.MAV_FRAME_LOCAL_NED,
+        mask,
+        float(rel[1]),
+        float(rel[0]),
+        -float(rel[2]),
+        float(vel[1]),
+        float(vel[0]),
+        -float(vel[2]),
+        float(acc[1]),
+        float(acc[0]),
+        -float(acc[2]),
+        0.0,
+        0.0,
+    )
+
+
+def fleet_speed(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message | None:
+    speed = ap.fleet_speed(stamp)
+    if speed is None:
+        return None
+    return mavlink.MAVLink_named_value_float_message(_boot_ms(stamp), b"FLEET_SPD", speed)
+
+
+def mission_time(
+    ap: Autopilot, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message | None:
+    now = ap.mission_clock.now(stamp.sim_s)
+    if now is None:
+        return None
+    return mavlink.MAVLink_named_value_int_message(
+        _boot_ms(stamp), b"MSN_TIME", _clamp_int(now * 1000, -(2**31), 2**31 - 1)
+    )
+
+
+def autopilot_version(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_autopilot_version_message(
+        CAPABILITIES,
+        FLIGHT_SW_VERSION,
+        0,
+        0,
+        0,
+        list(b"fleetln\x00"),
+        [0] * 8,
+        [0] * 8,
+        0,
+        0,
+        ap.sysid,
+        [0] * 18,
+    )
+
+
+Builder = Callable[["Autopilot", FleetSnapshot, "Stamp"], "mavlink.MAVLink_message | None"]
+
+NEEDS_ESTIMATED_GEODETIC = frozenset(
+    {
+        mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+        mavlink.MAVLINK_MSG_ID_VFR_HUD,
+        mavlink.MAVLINK_MSG_ID_GPS_RAW_INT,
+    }
+)
+NEEDS_TRUE_GEODETIC = frozenset({mavlink.MAVLINK_MSG_ID_SIM_STATE})
+
+BUILDERS: dict[int, Builder] = {
+    mavlink.MAVLINK_MSG_ID_HEARTBEAT: heartbeat,
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
+    mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: battery_status,
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: global_position_int,
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: local_position_ned,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: attitude,
+    mavlink.MAVLINK_MSG_ID_SIM_STATE: sim_state,
+    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
+    mavlink.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: home_position,
+    mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: gps_global_origin,
+    mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: gps_raw_int,
+    mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: position_target_local_ned,
+    mavlink.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: fleet_speed,
+    mavlink.MAVLINK_MSG_ID_NAMED_VALUE_INT: mission_time,
+    mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
+}

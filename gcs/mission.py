@@ -790,7 +790,9 @@ class _Parser:
                 for line in lines:
                     local = lonlat_to_local(line, origin)
                     self._near_origin(local, path, where)
-                    keep = np.r_[True, np.linalg.norm(np.diff(local, axis=0), axis=1) > 0]
+                    keep = np.r_[
+                        True, np.linalg.norm(np.diff(local, axis=0), axis=1) > DISTANCE_TOLERANCE
+                    ]
                     local = local[keep]
                     walls.extend((k, seg) for seg in np.stack([local[:-1], local[1:]], axis=1))
         if not polygons and not walls:

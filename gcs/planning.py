@@ -25,12 +25,10 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-import shapely
 
 from gcs.errors import InputError
 from gcs.mission import Mission, SpeedSchedule
 from planner.formation import (
-    DISTANCE_TOLERANCE,
     ParkingRows,
     collision_spacing,
     min_fleet_size,
@@ -44,6 +42,7 @@ from planner.kinematics import (
     smoothing_error_bound,
 )
 from planner.search import PathPlan, PathProblem, plan_path
+from planner.validity import row_refusal
 
 #: Tolerance when comparing a requested speed with the safe speed, m/s.
 SPEED_TOLERANCE = 1e-9
@@ -116,8 +115,6 @@ def plan_mission(
         mission.safety_margin,
         mission.parking,
     )
-    check_rows(mission, first_rows, fixed or lower)
-
     problem = PathProblem(
         start=mission.start.xy,
         goal=mission.goal.xy,
@@ -130,6 +127,7 @@ def plan_mission(
         fleet_size=fixed,
         method=method,
     )
+    check_rows(mission, problem, first_rows, fixed or lower)
     began = time.perf_counter()
     path_plan = plan_path(problem)
     planning_time = time.perf_counter() - began
@@ -151,7 +149,7 @@ def plan_mission(
         planning_time_s=planning_time,
     )
     if path_plan.rows is not None:
-        check_rows(mission, path_plan.rows, int(path_plan.fleet_size))
+        check_rows(mission, problem, path_plan.rows, int(path_plan.fleet_size))
     if not path_plan.valid:
         return invalid
 
@@ -199,39 +197,32 @@ def plan_mission(
     )
 
 
-def check_rows(mission: Mission, rows: ParkingRows, fleet_size: int) -> None:
-    """Eqs. 14-15: each row >= rho_c from every obstacle, the two rows >= 2 rho_c apart."""
+def check_rows(mission: Mission, problem: PathProblem, rows: ParkingRows, fleet_size: int) -> None:
+    """Eqs. 14-15 through the planner's check, as an input error naming the key at fault."""
+    refusal = row_refusal(problem, rows)
+    if refusal is None:
+        return
     rho = mission.safety_margin
-    obstacles = mission.obstacles
     length = (fleet_size - 1) * collision_spacing(rho) + rho
-    lines = {
-        "start": shapely.LineString(rows.start_row),
-        "goal": shapely.LineString(rows.goal_row),
-    }
-    where = {"start": "behind start", "goal": "beyond goal"}
     size = "" if mission.parking == "ray" else f", {length:.4g} m for {fleet_size} UAVs"
-    for key, line in lines.items():
-        if len(obstacles) == 0:
-            break
-        hits = obstacles.tree.query(line, predicate="dwithin", distance=rho - DISTANCE_TOLERANCE)
-        if len(hits):
-            dist = shapely.distance(obstacles.geometries[hits], line)
-            worst = int(hits[int(np.argmin(dist))])
-            raise InputError(
-                mission.source,
-                f"{key}.theta_deg",
-                f"a parking row ({where[key]}{size}) at least safety_margin = {rho:g} m from "
-                f"every obstacle (eq. 14); {mission.obstacle_keys[worst]} is "
-                f"{float(dist.min()):.3g} m from it",
-            )
-    gap = float(shapely.distance(lines["start"], lines["goal"]))
-    if gap < 2 * rho - DISTANCE_TOLERANCE:
+    if refusal.subject == "rows":
         raise InputError(
             mission.source,
             "goal.theta_deg",
             f"parking rows at least 2 x safety_margin = {2 * rho:g} m apart (eq. 15); the rows "
-            f"behind start and beyond goal{size} are {gap:.3g} m apart",
+            f"behind start and beyond goal{size} are {refusal.distance:.3g} m apart",
         )
+    key, where = {
+        "start_row": ("start", "behind start"),
+        "goal_row": ("goal", "beyond goal"),
+    }[refusal.subject]
+    raise InputError(
+        mission.source,
+        f"{key}.theta_deg",
+        f"a parking row ({where}{size}) at least safety_margin = {rho:g} m from "
+        f"every obstacle (eq. 14); {mission.obstacle_keys[refusal.obstacle]} is "
+        f"{refusal.distance:.3g} m from it",
+    )
 
 
 def plan_json(plan: MissionPlan) -> dict[str, Any]:

@@ -1,10 +1,31 @@
 """Flight recording: one MCAP file per run, written with foxglove-sdk (CONTRACTS.md, MCAP).
 
-Topics (the basics of issue 4; the recording issue extends them through `FlightRecorder`):
-`/plan`, `/uav<n>/setpoint`, `/uav<n>/state`, `/speed`, `/metrics` (JSON with a titled JSON
-schema), `/events` (`foxglove.Log`), `/uav<n>/fix` (`foxglove.LocationFix`, Map panel),
-`/mavlink/<n>/rx` and `/mavlink/<n>/tx` (every MAVLink message: raw bytes in base64 plus the
-decoded fields).
+Topics. Foxglove's well-known schemas (protobuf), so its panels work without configuration:
+* `/uav<n>/fix` (`foxglove.LocationFix`): the position UAV n reports (Map panel);
+  `/uav<n>/target`: the setpoint streamed to it, same type;
+* `/scene` (`foxglove.SceneUpdate`): obstacles, margins, planned path, parking rows, base
+  stations, ground users, UAVs, virtual targets and radio links (see `gcs.scene`);
+* `/tf` (`foxglove.FrameTransforms`): `map -> uav<n>` and `map -> uav<n>/target` every tick;
+* `/events` (`foxglove.Log`); `/map/obstacles` and `/map/plan` (`foxglove.GeoJSON`, lon/lat:
+  building footprints and walls; path, rows, stations), repeated every `GEOJSON_PERIOD_S`.
+JSON with a titled JSON schema (`SCHEMAS`): `/plan`, `/uav<n>/setpoint`, `/uav<n>/state`,
+`/speed` (requests, acknowledgements), `/metrics` (per tick, with the fleet positions the
+monitors sampled), `/fleet` (per tick: the instant's smallest distances and radio links),
+`/radio` (radio-medium counters, when a medium reports them), `/mavlink/<n>/rx|tx` (every
+MAVLink message: raw bytes in base64 plus the decoded fields).
+
+Attachments: the mission file (`mission.yaml`), the GeoJSON files it names
+(`geojson/<name as written in the mission>`), the plan JSON (`plan.json`) and, at the end, the
+run JSON (`run.json`). Metadata records: `mission` (name, source, fleet size...), `clock`
+(Unix ns at mission time 0, speedup; written when the clock is anchored) and `outcome`
+(completed, exit status, reason; written at the end: a recording without it did not finish).
+foxglove-sdk 0.30's `MCAPWriter` writes attachments and metadata into the live file itself
+(`attach`, `write_metadata`), so a recording killed mid-flight keeps everything written up to
+its last flush; nothing is added afterwards.
+
+Durability: chunked, zstd-compressed (foxglove-sdk's defaults), and flushed (the chunk is
+closed and written to the file) at least every `FLUSH_PERIOD_S` of wall time while messages
+arrive: a GCS killed with SIGKILL leaves a file readable up to about a second before.
 
 Time base: log time = the GCS's wall clock (Unix ns) at mission time 0 plus the mission time,
 for every topic. The mission clock is anchored only once the fleet is connected; what is
@@ -28,13 +49,19 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import foxglove
-from foxglove.channels import LocationFixChannel, LogChannel
-from foxglove.messages import LocationFix, Log, LogLevel, Timestamp
+import numpy as np
+from foxglove.channels import FrameTransformsChannel, GeoJsonChannel, LocationFixChannel, LogChannel
+from foxglove.messages import GeoJson, LocationFix, Log, LogLevel, SceneUpdate, Timestamp
+
+from gcs import scene
 
 #: Recording profile written in the MCAP header.
 PROFILE = "fleetline"
 #: The writer is flushed at least this often (wall seconds) so a crash loses little.
 FLUSH_PERIOD_S = 1.0
+#: The GeoJSON map layers are repeated this often (mission seconds): late live clients and
+#: a seek in Foxglove find them without going back to the start.
+GEOJSON_PERIOD_S = 5.0
 
 
 class TimeBase(Protocol):
@@ -83,6 +110,7 @@ SCHEMAS: dict[str, dict] = {
             "distance": _NUM,
             "latitude": _NUM,
             "longitude": _NUM,
+            "altitude": _NUM,
             "relative_altitude": _NUM,
         },
         ["t", "uav", "position"],
@@ -129,6 +157,30 @@ SCHEMAS: dict[str, dict] = {
             "max_tracking_error_m": _NUM_OR_NULL,
             "tracking_error_m": {"type": "array", "items": _NUM_OR_NULL},
             "connected": {"type": ["boolean", "null"]},
+            "positions": {"type": "array", "items": _VEC_OR_NULL},
+        },
+        ["t"],
+    ),
+    "fleet": _schema(
+        "fleetline.FleetSample",
+        {
+            "t": _NUM,
+            "uav_uav_m": _NUM_OR_NULL,
+            "uav_obstacle_m": _NUM_OR_NULL,
+            "radio_links": _INT,
+            "uav_links": {"type": "array", "items": _VEC},
+            "station_links": {"type": "array", "items": _VEC},
+        },
+        ["t"],
+    ),
+    "radio": _schema(
+        "fleetline.RadioCounters",
+        {
+            "t": _NUM,
+            "packets": {"type": "object"},
+            "ground_users": {"type": "object"},
+            "delay_ms": {"type": "object"},
+            "per_uav": {"type": "array"},
         },
         ["t"],
     ),

@@ -7,22 +7,23 @@ rho_c sqrt(2) from A and B perpendicular to the parking rows (eq. 40). Nodes clo
 distance tolerance are merged, nodes inside an obstacle's margin dropped.
 
 Edges are never built for all node pairs. `EdgeCache` computes the out-edges of a node the
-first time the search needs them, for the whole spatial tile around it at once (vectorised
-pairs; obstacle clearance through the prepared union of `Obstacles.segments_within`). Only the
-obstacle part of definition 5 is cached; the parking-row part depends on the fleet size and is
-applied by the search (`row_edge_mask`).
+first time the search needs them, for the whole spatial tile around it at once, as arrays of
+pairs: candidate targets (all, or on large maps a radius query completed per octant so open
+areas are still crossed, plus B always), tangency (taut graph), collinear pruning, exact
+angular-shadow culling by the obstacles nearest to either end (numpy), and only then the
+exact clearance test through the prepared obstacle union (`Obstacles.segments_within`). Only
+the obstacle part of definition 5 is cached; the parking-row part depends on the fleet size
+and is applied by the search.
 
 Two graphs share this code:
 * the *full* graph of definition 5 (every node, every clear pair);
 * the *taut* graph, used first: only nodes a shortest path can bend at (a node on the flat
   margin of its own obstacle's side cannot be a bend of a taut path), and only edges that are
-  tangent at both ends to the mitre corner the node goes round (an edge into the corner's cone,
-  or straight away from it, is never part of a locally shortest path). The search adds the
-  matching transition rule (a bend wraps round the node's corner). On large maps the taut
-  graph's candidate targets come from a radius query completed per octant, so each node
-  reaches its nearest nodes in every direction, plus B always.
-Both graphs drop an edge v->w that passes exactly through another node x with valid edges
-v->x and x->w (a straight chain replaces it; the returned path is simplified back).
+  tangent at both ends to the mitre corner the node goes round (an edge into the corner's
+  cone, or straight away from it, is never part of a locally shortest path). The search adds
+  the matching transition rule (a bend wraps round the node's corner, `wraps_corner`).
+Both drop an edge v->w that passes exactly through another candidate x of v: v->x then x->w
+is the same line, with valid edges whenever v->w is valid (the returned path is simplified).
 """
 
 from __future__ import annotations
@@ -325,7 +326,7 @@ class EdgeCache:
         self.side_at_src = np.zeros(0)  # corner_side of each edge at its source
         self.side_at_dst = np.zeros(0)  # ... and at its destination
         self.radius: float | None = None
-        self._shadow: tuple[np.ndarray, ...] | None = None
+        self._shadow: np.ndarray | None = None
         self._shadow_done = np.zeros(0, bool)
         pts = nodes.points
         if local_candidates is not None and len(self.targets) > 4 * local_candidates:
@@ -470,7 +471,8 @@ class EdgeCache:
         return blocked
 
     def _in_shadow(self, node: np.ndarray, angle: np.ndarray, length: np.ndarray) -> np.ndarray:
-        ref, low, high, far = (a[node] for a in self._shadow)
+        shadow = self._shadow[node]  # (k, _OCCLUDERS, 4): ref, low, high, far
+        ref, low, high, far = (shadow[..., c] for c in range(4))
         rel = np.mod(angle[:, None] - ref + math.pi, 2.0 * math.pi) - math.pi
         inside = (rel > low + ANGLE_TOLERANCE) & (rel < high - ANGLE_TOLERANCE)
         return np.any(inside & (length[:, None] > far + DISTANCE_TOLERANCE), axis=1)
@@ -480,13 +482,8 @@ class EdgeCache:
         relative to it, and farthest vertex distance; unused slots never block."""
         count = len(self.nodes)
         if self._shadow is None:
-            shape = (count, _OCCLUDERS)
-            self._shadow = (
-                np.zeros(shape),
-                np.full(shape, np.inf),
-                np.full(shape, -np.inf),
-                np.full(shape, np.inf),
-            )
+            self._shadow = np.empty((count, _OCCLUDERS, 4))
+            self._shadow[...] = [0.0, np.inf, -np.inf, np.inf]  # empty slots never block
             self._shadow_done = np.zeros(count, bool)
         index = index[~self._shadow_done[index]]
         if len(index) == 0:
@@ -513,12 +510,10 @@ class EdgeCache:
         ref_s = np.arctan2(centre[:, 1], centre[:, 0])
         ang = np.arctan2(verts[..., 1], verts[..., 0]) - ref_s[:, None]
         ang = np.mod(ang + math.pi, 2.0 * math.pi) - math.pi
-        ref, low, high, far = self._shadow
-        rows = index[s]
-        ref[rows, rank] = ref_s
-        low[rows, rank] = ang.min(axis=1)
-        high[rows, rank] = ang.max(axis=1)
-        far[rows, rank] = np.hypot(verts[..., 0], verts[..., 1]).max(axis=1)
+        far = np.hypot(verts[..., 0], verts[..., 1]).max(axis=1)
+        self._shadow[index[s], rank] = np.column_stack(
+            [ref_s, ang.min(axis=1), ang.max(axis=1), far]
+        )
 
     def _append(self, sources, src, dst, unit, length) -> None:
         need = self.size + len(src)

@@ -207,11 +207,12 @@ class Refusal:
 def check_rows(problem: PathProblem, rows: ParkingRows) -> str | None:
     """Eqs. 14-15: each parking row at least rho_c from every obstacle, the two rows at least
     2 rho_c apart. Returns the reason (one sentence) or None."""
-    refusal = _row_refusal(problem, rows)
+    refusal = row_refusal(problem, rows)
     return refusal.message if refusal else None
 
 
-def _row_refusal(problem: PathProblem, rows: ParkingRows) -> Refusal | None:
+def row_refusal(problem: PathProblem, rows: ParkingRows) -> Refusal | None:
+    """Eqs. 14-15 as a `Refusal` naming the row (and obstacle) at fault, or None."""
     rho = problem.safety_margin
     obstacles = problem.obstacles
     named = (("start_row", "behind A", rows.start_row), ("goal_row", "beyond B", rows.goal_row))
@@ -299,7 +300,7 @@ def precheck_issue(problem: PathProblem, fleet_size: int | None = None) -> Refus
         rho,
         problem.parking,
     )
-    return _row_refusal(problem, rows)
+    return row_refusal(problem, rows)
 
 
 def precheck(problem: PathProblem, fleet_size: int | None = None) -> str | None:

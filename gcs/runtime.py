@@ -129,7 +129,7 @@ class RunOptions:
     landing_settle_s: float = 10.0  # land anyway this long after the target stopped
     connect_timeout_s: float = 60.0  # wall: every UAV ready within this
     finish_timeout_s: float = 120.0  # mission time for the landings after an abort
-    metrics_period_s: float = 0.1  # mission time between /metrics records
+    metrics_period_s: float = 0.0  # mission time between /metrics records (0: every tick)
 
 
 @dataclass
@@ -233,6 +233,10 @@ class Recorder(Protocol):
     def speed(self, payload: dict, wall: float) -> None: ...
 
     def metrics(self, payload: dict, wall: float) -> None: ...
+
+    def fleet(
+        self, t: float, positions: np.ndarray, targets: np.ndarray | None, wall: float
+    ) -> None: ...
 
     def event(self, level: str, message: str, wall: float, name: str = "gcs") -> None: ...
 
@@ -603,7 +607,7 @@ class MissionRun:
         t = self.clock.mission_time(now)
         self._resume_speed = float(self.profile.speed_at(self.speeds.earliest(t)))
         self.frozen_by = why
-        self._issue(0.0, t, "freeze", now)
+        self._issue(0.0, t, f"freeze:{why}", now)
 
     def _resume(self, now: float) -> None:
         t = self.clock.mission_time(now)
@@ -705,6 +709,7 @@ class MissionRun:
                     "distance": distance,
                     "latitude": lat,
                     "longitude": lon,
+                    "altitude": alt,
                     "relative_altitude": alt - driver.home_altitude_amsl,
                 },
                 now,
@@ -783,7 +788,7 @@ class MissionRun:
                 )
         # The fleet now: each UAV's last sample moved on by its velocity (samples are up to a
         # telemetry period old); a UAV silent for longer than that is unknown, not guessed.
-        positions = np.full((self.size, 2), np.nan)
+        fleet = np.full((self.size, 3), np.nan)  # x, y extrapolated; z as last reported
         for index, track in enumerate(self.tracks):
             if track.last_position is None or track.last_sample_time is None:
                 continue
@@ -793,8 +798,12 @@ class MissionRun:
             xy = track.last_position[:2]
             if track.last_velocity is not None:
                 xy = xy + track.last_velocity[:2] * max(age, 0.0)
-            positions[index] = xy
+            fleet[index, :2] = xy
+            fleet[index, 2] = track.last_position[2]
+        positions = fleet[:, :2]
         events += self.safety.positions(t, positions)
+        targets = self.formation.positions(self.profile.distance(t))
+        self.recorder.fleet(t, fleet, targets, now)
         silent = np.array([d.link.silent_for(now) for d in self.drivers])
         timeout = max(
             self.options.link_timeout_s / self.options.speedup, self.options.link_wall_floor_s
@@ -819,6 +828,8 @@ class MissionRun:
                     ),
                     "tracking_error_m": [_finite(e) for e in self.tracking_now.tolist()],
                     "connected": stats.last_connected,
+                    # the sample the monitors checked: `gcs log report` re-checks it
+                    "positions": [None if math.isnan(p[0]) else p for p in positions.tolist()],
                 },
                 now,
             )

@@ -42,7 +42,7 @@ class SpeedChange:
 
     `effective_s` and `requested_s` are mission times (s); `seq` numbers changes from 1 so that
     vehicles drop duplicates; `source` says who asked ("schedule", "operator", "leader:<n>",
-    "freeze", "resume").
+    "freeze:<why>" with why one of operator, takeoff, link; "resume").
     """
 
     seq: int

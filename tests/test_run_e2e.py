@@ -243,7 +243,7 @@ def test_losing_a_vehicle_freezes_reports_and_lands_the_others(tmp_path: Path):
     assert "operator" in sources
     operator = run["speed_changes"][sources.index("operator")]
     assert operator["speed"] == 6 and len(operator["acks"]) == run["fleet_size"]
-    freeze = run["speed_changes"][sources.index("freeze")]
+    freeze = run["speed_changes"][sources.index("freeze:link")]
     assert freeze["speed"] == 0 and freeze["effective_s"] > freeze["requested_s"]
     assert "2" not in freeze["acks"] and len(freeze["acks"]) == run["fleet_size"] - 1
     phases = [u["phase"] for u in run["per_uav"]]
@@ -253,7 +253,7 @@ def test_losing_a_vehicle_freezes_reports_and_lands_the_others(tmp_path: Path):
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
     events = [m for _, m in read_log(log).get("/speed", [])]
-    assert any(m.get("source") == "freeze" for m in events)
+    assert any(m.get("source") == "freeze:link" for m in events)
 
 
 def test_ctrl_c_once_freezes_twice_lands_everyone_where_they_are(tmp_path: Path):
@@ -273,7 +273,7 @@ def test_ctrl_c_once_freezes_twice_lands_everyone_where_they_are(tmp_path: Path)
         deadline = time.monotonic() + 60
         wait_line(gcs.stderr, selector, "UAV 1: taking_off -> following", deadline, seen)
         gcs.send_signal(signal.SIGINT)
-        wait_line(gcs.stderr, selector, "m/s at t=", deadline, seen)  # the freeze
+        wait_line(gcs.stderr, selector, "(freeze:operator)", deadline, seen)
         gcs.send_signal(signal.SIGINT)
         out, err = gcs.communicate(timeout=60)
     finally:
@@ -283,7 +283,7 @@ def test_ctrl_c_once_freezes_twice_lands_everyone_where_they_are(tmp_path: Path)
     assert gcs.returncode == 1, err[-3000:]
     run = json.loads(out)
     assert run["completed"] is False and "interrupted" in run["reason"]
-    freeze = [c for c in run["speed_changes"] if c["source"] == "freeze"]
+    freeze = [c for c in run["speed_changes"] if c["source"] == "freeze:operator"]
     assert len(freeze) == 1 and freeze[0]["speed"] == 0
     assert len(freeze[0]["acks"]) == run["fleet_size"]
     kinds = [e["kind"] for e in run["events"]]

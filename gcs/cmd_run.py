@@ -28,7 +28,7 @@ from gcs.errors import InputError
 from gcs.link import Link
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
-from gcs.recording import FlightRecorder
+from gcs.recording import FlightRecorder, LiveServerError
 from gcs.runtime import MissionClock, MissionRun, RunOptions
 from gcs.speed import OperatorSocket, socket_path_for
 from gcs.summary import EXIT_ABORTED, exit_status, run_json, summary_renderable
@@ -71,7 +71,8 @@ def register(mission_commands: argparse._SubParsersAction) -> None:
         const=8765,
         type=int,
         metavar="PORT",
-        help="also serve the recording live to Foxglove on 127.0.0.1:PORT (default 8765)",
+        help="also serve the recording live to Foxglove on 127.0.0.1:PORT (default 8765; "
+        "0 picks a free port, printed at start)",
     )
     run.add_argument(
         "--insecure", action="store_true", help="do not sign MAVLink (signing is not built yet)"
@@ -143,8 +144,10 @@ def check_arguments(args: argparse.Namespace) -> None:
         )
     if args.vehicles_per_process < 1:
         raise InputError(None, "--vehicles-per-process", "an integer >= 1")
-    if args.foxglove is not None and not 0 < args.foxglove < 65536:
-        raise InputError(None, "--foxglove", f"a TCP port in 1..65535, got {args.foxglove}")
+    if args.foxglove is not None and not 0 <= args.foxglove < 65536:
+        raise InputError(
+            None, "--foxglove", f"a TCP port in 1..65535 (0: any free port), got {args.foxglove}"
+        )
 
 
 def run_command(args: argparse.Namespace) -> int:
@@ -193,13 +196,16 @@ def run_command(args: argparse.Namespace) -> int:
     formation = plan.formation
     stderr_tty = sys.stderr.isatty()
     with ExitStack() as stack:
-        recorder = FlightRecorder(log_path, clock, force=args.force, serve_port=args.foxglove)
+        try:
+            recorder = FlightRecorder(log_path, clock, force=args.force, serve_port=args.foxglove)
+        except LiveServerError as error:
+            raise InputError(None, "--foxglove", f"a free TCP port ({error})") from None
         stack.callback(recorder.close)
-        plan_data = plan_json(plan)
-        recorder.attach("mission.yaml", "application/yaml", mission.text.encode())
-        recorder.attach("plan.json", "application/json", json.dumps(plan_data).encode())
-        recorder.metadata("mission", {"name": mission.name, "source": str(mission.source)})
-        recorder.plan(plan_data, time.monotonic())
+        if recorder.server_port is not None:
+            Console(stderr=True, highlight=False).print(
+                f"Foxglove: live on ws://127.0.0.1:{recorder.server_port}"
+            )
+        recorder.describe(plan, plan_json(plan), time.monotonic())
 
         if mission.fleet.backend == "sim" and not (args.connect or mission.fleet.connections):
             leaders: dict[int, list[tuple[float, float]]] = {}
@@ -256,8 +262,9 @@ def run_command(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGINT, on_sigint)
         stack.callback(signal.signal, signal.SIGINT, previous)
         result = run.run()
+        data = run_json(result, str(log_path), mission.safety_margin)
+        recorder.outcome(data)
 
-    data = run_json(result, str(log_path), mission.safety_margin)
     if args.json:
         print(json.dumps(data, allow_nan=False))
     console.print(summary_renderable(result, str(log_path), mission.safety_margin))

@@ -31,7 +31,7 @@ def plan_figure(plan: MissionPlan) -> Figure:
     """Build the figure (without pyplot: no global state, no GUI)."""
     fig = Figure(figsize=(14, 6.5), layout="constrained")
     left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.15, 1]})
-    _draw_map(left, plan)
+    draw_map(left, plan)
     _draw_distance(right, plan)
     status = "valid" if plan.valid else f"no valid path: {plan.reason}"
     fig.suptitle(f"{plan.mission.name}: {status}")
@@ -57,7 +57,7 @@ def _shape_patch(geom: shapely.Geometry, **style) -> PathPatch:
     return PathPatch(MplPath(vertices, codes), **style)
 
 
-def _draw_map(ax, plan: MissionPlan) -> None:
+def draw_map(ax, plan: MissionPlan) -> None:
     mission = plan.mission
     pp = plan.path_plan
     rho = mission.safety_margin

@@ -48,11 +48,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
-import foxglove
 import numpy as np
+import yaml
 from foxglove.channels import FrameTransformsChannel, GeoJsonChannel, LocationFixChannel, LogChannel
 from foxglove.messages import GeoJson, LocationFix, Log, LogLevel, SceneUpdate, Timestamp
 
+import foxglove
 from gcs import scene
 
 #: Recording profile written in the MCAP header.
@@ -62,6 +63,10 @@ FLUSH_PERIOD_S = 1.0
 #: The GeoJSON map layers are repeated this often (mission seconds): late live clients and
 #: a seek in Foxglove find them without going back to the start.
 GEOJSON_PERIOD_S = 5.0
+
+
+class LiveServerError(Exception):
+    """The live Foxglove server could not start (its port is taken)."""
 
 
 class TimeBase(Protocol):
@@ -228,12 +233,14 @@ def _fields_json(message) -> str:
 
 
 class FlightRecorder:
-    """Writes one run to an MCAP file. Every method takes the wall clock (`time.monotonic()`)
-    of the thing recorded; the mission clock turns it into the log time.
+    """Writes one run to an MCAP file (and, with `serve_port`, serves the same channels live
+    over Foxglove's WebSocket protocol on 127.0.0.1; port 0 picks a free one, `server_port`).
 
-    Subclass or wrap it to add topics (scene, transforms, attachments): `channel(topic,
-    schema_key)` gives a JSON channel on this recorder's context, `context` the foxglove
-    context for typed channels, `write(channel, payload, wall)` logs with the shared time base.
+    Every method takes the wall clock (`time.monotonic()`) of the thing recorded; the mission
+    clock turns it into the log time. `describe(plan, ...)` records what the run is about
+    (attachments, metadata, the static scene and map layers), `fleet(...)` the fleet at each
+    tick, `outcome(...)` how it ended. `channel(topic, schema_key)` gives a JSON channel on this
+    recorder's context, `write(channel, payload, wall)` logs with the shared time base.
     """
 
     def __init__(
@@ -248,26 +255,56 @@ class FlightRecorder:
         self.path = Path(path)
         self.clock = clock
         self.context = foxglove.Context()
-        # The sink first: anything logged on a channel of this context from now on is kept.
-        self._writer = foxglove.open_mcap(
-            self.path,
-            allow_overwrite=force,
-            context=self.context,
-            writer_options=foxglove.mcap.MCAPWriteOptions(profile=PROFILE),
-        )
-        self._server = (
-            foxglove.start_server(context=self.context, port=serve_port, name="fleetline")
-            if serve_port is not None
-            else None
-        )
+        # The sinks before any channel: anything logged on this context from now on is kept.
+        # The server first: a port in use is refused before the file is created.
+        self._server = None
+        if serve_port is not None:
+            try:
+                self._server = foxglove.start_server(
+                    context=self.context, host="127.0.0.1", port=serve_port, name="fleetline"
+                )
+            except RuntimeError as error:  # FoxgloveError: the port is taken
+                raise LiveServerError(f"127.0.0.1:{serve_port}: {error}") from None
+        try:
+            self._writer = foxglove.open_mcap(
+                self.path,
+                allow_overwrite=force,
+                context=self.context,
+                writer_options=foxglove.mcap.MCAPWriteOptions(profile=PROFILE),
+            )
+        except BaseException:
+            if self._server is not None:
+                self._server.stop()
+            raise
         self._json: dict[str, foxglove.Channel] = {}
-        self._fixes: dict[int, LocationFixChannel] = {}
+        self._fixes: dict[str, LocationFixChannel] = {}
         self._events = LogChannel("/events", context=self.context)
+        self._tf = FrameTransformsChannel("/tf", context=self.context)
+        self._scene = foxglove.Channel(
+            "/scene",
+            schema=SceneUpdate.get_schema(),
+            message_encoding="protobuf",
+            context=self.context,
+        )
+        self._geo = {
+            topic: GeoJsonChannel(topic, context=self.context)
+            for topic in ("/map/obstacles", "/map/plan")
+        }
+        self._geometry: scene.SceneGeometry | None = None
+        self._static_scene = b""
+        self._geojson: dict[str, str] = {}
+        self._last_geojson: float | None = None
         self._pending: list[tuple[Callable[[int], None], float]] = []
         self._last_flush = time.monotonic()
         self._unix_now = unix_now
+        self._clock_noted = False
         self.messages = 0
         self.closed = False
+
+    @property
+    def server_port(self) -> int | None:
+        """TCP port of the live Foxglove server (None without one)."""
+        return None if self._server is None else self._server.port
 
     # ------------------------------------------------------------------ generic
     def channel(self, topic: str, schema_key: str) -> foxglove.Channel:
@@ -281,7 +318,8 @@ class FlightRecorder:
         return channel
 
     def write(self, channel, payload: Any, wall: float) -> None:
-        """Log `payload` (a dict for JSON channels, a foxglove message for typed ones)."""
+        """Log `payload`: a dict (JSON channels), a foxglove message (typed channels) or bytes
+        already encoded for the channel."""
         if isinstance(payload, dict):
             data = json.dumps(payload, allow_nan=False, separators=(",", ":")).encode()
         else:
@@ -298,15 +336,31 @@ class FlightRecorder:
         if not self.clock.anchored:
             self._pending.append((emit, wall))
             return
-        if self._pending:
+        if self._pending or not self._clock_noted:
             self._drain_pending()
         emit(self.clock.log_time_ns(wall))
         self.messages += 1
         if wall - self._last_flush >= FLUSH_PERIOD_S:
-            self._last_flush = wall
-            self._writer.flush()
+            self.flush(wall)
+
+    def flush(self, wall: float | None = None) -> None:
+        """Close the current chunk and write it to the file now."""
+        self._last_flush = time.monotonic() if wall is None else wall
+        self._writer.flush()
 
     def _drain_pending(self) -> None:
+        if not self._clock_noted:
+            self._clock_noted = True
+            epoch = getattr(self.clock, "epoch_ns", None)
+            speedup = getattr(self.clock, "speedup", None)
+            self._writer.write_metadata(
+                "clock",
+                {
+                    "epoch_ns": str(epoch),
+                    "speedup": repr(speedup),
+                    "time_base": "log time = Unix ns at mission time 0 + mission time",
+                },
+            )
         pending, self._pending = self._pending, []
         for emit, wall in pending:
             emit(self.clock.log_time_ns(wall))
@@ -320,7 +374,18 @@ class FlightRecorder:
         self.write(self.channel("/plan", "plan"), plan, wall)
 
     def setpoint(self, uav: int, payload: dict, wall: float) -> None:
+        """The setpoint streamed to UAV `uav`; with its geodetic position also a
+        `foxglove.LocationFix` on `/uav<n>/target` (the commanded track on the Map panel)."""
         self.write(self.channel(f"/uav{uav}/setpoint", "setpoint"), payload, wall)
+        if "latitude" in payload and "longitude" in payload:
+            self._location(
+                f"/uav{uav}/target",
+                f"uav{uav}/target",
+                payload["latitude"],
+                payload["longitude"],
+                payload.get("altitude", 0.0),
+                wall,
+            )
 
     def state(self, uav: int, payload: dict, wall: float) -> None:
         self.write(self.channel(f"/uav{uav}/state", "state"), payload, wall)
@@ -333,17 +398,22 @@ class FlightRecorder:
 
     def fix(self, uav: int, latitude: float, longitude: float, altitude: float, wall: float):
         """A `foxglove.LocationFix` on `/uav<n>/fix` (Foxglove's Map panel)."""
-        channel = self._fixes.get(uav)
+        self._location(f"/uav{uav}/fix", f"uav{uav}", latitude, longitude, altitude, wall)
+
+    def _location(
+        self, topic: str, frame: str, latitude: float, longitude: float, altitude: float, wall
+    ) -> None:
+        channel = self._fixes.get(topic)
         if channel is None:
-            channel = LocationFixChannel(f"/uav{uav}/fix", context=self.context)
-            self._fixes[uav] = channel
+            channel = LocationFixChannel(topic, context=self.context)
+            self._fixes[topic] = channel
 
         def emit(log_time: int) -> None:
             stamp = Timestamp(log_time // 1_000_000_000, log_time % 1_000_000_000)
             channel.log(
                 LocationFix(
                     timestamp=stamp,
-                    frame_id=f"uav{uav}",
+                    frame_id=frame,
                     latitude=latitude,
                     longitude=longitude,
                     altitude=altitude,
@@ -377,6 +447,121 @@ class FlightRecorder:
         ).encode()
         self.write(self.channel(f"/mavlink/{uav}/{direction}", "mavlink"), data, wall)
 
+    # ------------------------------------------------------------------ the run
+    def describe(self, plan, plan_data: dict, wall: float) -> None:
+        """What the run is about, recorded first so that the file stands alone: the mission
+        file and its GeoJSON files and the plan JSON as attachments, `mission` metadata, the
+        `/plan` message, the static scene and the map layers. `plan` is a valid
+        `gcs.planning.MissionPlan`."""
+        mission = plan.mission
+        self.attach("mission.yaml", "application/yaml", mission.text.encode())
+        for name, data in mission_geojson_files(mission).items():
+            self.attach(f"geojson/{name}", "application/geo+json", data)
+        self.attach("plan.json", "application/json", json.dumps(plan_data).encode())
+        self.metadata(
+            "mission",
+            {
+                "name": mission.name,
+                "source": str(mission.source),
+                "fleet_size": str(plan.fleet_size),
+                "backend": mission.fleet.backend,
+                "safety_margin_m": repr(mission.safety_margin),
+                "radio_range_m": repr(mission.radio_range),
+                "origin": json.dumps(
+                    {
+                        "lat": mission.origin.lat,
+                        "lon": mission.origin.lon,
+                        "alt": mission.origin.alt,
+                    }
+                ),
+            },
+        )
+        self.plan(plan_data, wall)
+        geometry = scene.SceneGeometry.from_plan(plan)
+        self._geometry = geometry
+        self._static_scene = scene.encode_static_scene(geometry)
+        self._geojson = {
+            "/map/obstacles": scene.obstacles_geojson(geometry),
+            "/map/plan": scene.plan_geojson(geometry),
+        }
+        self.write(self._scene, self._static_scene, wall)
+        self._write_geojson(wall)
+        self.flush()
+
+    def _write_geojson(self, wall: float) -> None:
+        for topic, text in self._geojson.items():
+            self.write(self._geo[topic], GeoJson(geojson=text), wall)
+
+    def fleet(
+        self, t: float, positions: np.ndarray, targets: np.ndarray | None, wall: float
+    ) -> None:
+        """The fleet at mission time `t`: positions (N, 3) in the local frame (NaN = unknown)
+        and virtual targets V_n(t) (N, 2). Writes `/tf`, and once `describe` was called, the
+        complete `/scene` with this instant's radio links and `/fleet` (the instant's smallest
+        UAV-UAV and UAV-obstacle distances)."""
+        positions = np.asarray(positions, float)
+
+        def emit_tf(log_time: int) -> None:
+            stamp = Timestamp(log_time // 1_000_000_000, log_time % 1_000_000_000)
+            altitude = self._geometry.altitude if self._geometry is not None else 0.0
+            self._tf.log(scene.transforms(positions, targets, altitude, stamp), log_time=log_time)
+
+        self._emit(emit_tf, wall)
+        geometry = self._geometry
+        if geometry is None:
+            return
+        uav_pairs, station_pairs = scene.radio_links(
+            positions, geometry.stations, geometry.radio_range
+        )
+        links = scene.links_update(positions, geometry.stations, uav_pairs, station_pairs)
+        self.write(self._scene, self._static_scene + links, wall)
+        xy = positions[:, :2]
+        known = xy[np.isfinite(xy).all(axis=1)]
+        if len(known):
+            gaps = np.hypot(*(known[:, None, :] - known[None, :, :]).transpose(2, 0, 1))
+            gaps[np.diag_indices(len(known))] = np.inf
+            pair = float(gaps.min())
+            obstacle = float(geometry.obstacles.distance_to_points(known).min())
+        else:
+            pair = obstacle = math.inf
+        self.write(
+            self.channel("/fleet", "fleet"),
+            {
+                "t": t,
+                "uav_uav_m": pair if math.isfinite(pair) else None,
+                "uav_obstacle_m": obstacle if math.isfinite(obstacle) else None,
+                "radio_links": len(uav_pairs) + len(station_pairs),
+                "uav_links": (uav_pairs + 1).tolist(),
+                "station_links": [[u + 1, s] for u, s in station_pairs.tolist()],
+            },
+            wall,
+        )
+        if self._last_geojson is None or t - self._last_geojson >= GEOJSON_PERIOD_S:
+            self._last_geojson = t
+            self._write_geojson(wall)
+
+    def radio(self, payload: dict, wall: float) -> None:
+        """Radio-medium counters (`fleetline.RadioCounters`: cumulative `packets` sent,
+        received and dropped, `ground_users` likewise, optional `delay_ms` and `per_uav`) on
+        `/radio`: `gcs log report` draws the packets received at base stations from them."""
+        self.write(self.channel("/radio", "radio"), payload, wall)
+
+    def outcome(self, run_data: dict) -> None:
+        """How the run ended: the run JSON as an attachment and `outcome` metadata."""
+        self.attach("run.json", "application/json", json.dumps(run_data).encode())
+        keys = (
+            "completed",
+            "exit_status",
+            "reason",
+            "fleet_size",
+            "duration_s",
+            "min_uav_uav_m",
+            "min_uav_obstacle_m",
+            "max_tracking_error_m",
+            "connected_fraction",
+        )
+        self.metadata("outcome", {k: json.dumps(run_data[k]) for k in keys if k in run_data})
+
     def attach(self, name: str, media_type: str, data: bytes) -> None:
         """An MCAP attachment (mission file, plan JSON...)."""
         now = self._unix_now()
@@ -404,6 +589,24 @@ class FlightRecorder:
         if self._server is not None:
             self._server.stop()
         self._writer.close()
+
+
+def mission_geojson_files(mission) -> dict[str, bytes]:
+    """The GeoJSON files the mission names (`obstacles[i].geojson`), by the name written in
+    the mission file, read from beside it (the mission was validated: they exist)."""
+    try:
+        data = yaml.safe_load(mission.text) or {}
+    except yaml.YAMLError:
+        return {}
+    files = {}
+    for item in data.get("obstacles") or []:
+        if isinstance(item, dict) and isinstance(item.get("geojson"), str):
+            name = item["geojson"]
+            try:
+                files[name] = (Path(mission.source).parent / name).read_bytes()
+            except OSError:
+                continue
+    return files
 
     def __enter__(self) -> FlightRecorder:
         return self

@@ -303,7 +303,7 @@ class MissionRun:
         self._link_deadline: float | None = None
         self.interrupts = 0
         self._handled_interrupts = 0
-        self._samples: list[tuple[int, float, np.ndarray]] = []
+        self._samples: list[tuple[int, float, np.ndarray, bool]] = []  # uav, t, xyz, true?
         self._tick_walls: list[float] = []
         self.tick_work: list[float] = []  # wall seconds each flight tick took
         self._last_metrics: float | None = None
@@ -734,7 +734,7 @@ class MissionRun:
         if self.clock.anchored:
             t = self._vehicle_clocks[index].mission_time(vehicle_s, self.clock.mission_time(now))
             track.last_sample_time = t
-            self._samples.append((index, t, position[:2].copy()))
+            self._samples.append((index, t, position.copy(), truth))
         else:
             self.recorder.state(
                 driver.uav_id,
@@ -756,7 +756,9 @@ class MissionRun:
         if self._samples:
             uavs = np.array([s[0] for s in self._samples])
             times = np.array([s[1] for s in self._samples])
-            xy = np.array([s[2] for s in self._samples])
+            sampled = np.array([s[2] for s in self._samples])
+            xy = sampled[:, :2]
+            truths = [s[3] for s in self._samples]
             self._samples = []
             rows = np.arange(len(uavs))
             virtual = self.formation.positions(self.profile.distance(times))[rows, uavs]
@@ -769,14 +771,17 @@ class MissionRun:
             for k, index in enumerate(uavs.tolist()):
                 driver = self.drivers[index]
                 tel = driver.telemetry
+                # the position of this sample (the one its tracking error is computed from);
+                # the other one is the latest of its kind
+                sample = sampled[k].tolist()
                 self.recorder.state(
                     driver.uav_id,
                     {
                         "t": float(times[k]),
                         "uav": driver.uav_id,
                         "phase": driver.phase.value,
-                        "position": _list(tel.position_enu),
-                        "true_position": _list(tel.true_position_enu),
+                        "position": _list(tel.position_enu) if truths[k] else sample,
+                        "true_position": sample if truths[k] else _list(tel.true_position_enu),
                         "velocity": _list(tel.velocity_enu),
                         "virtual_target": virtual[k].tolist(),
                         "tracking_error_m": float(errors[k]),

@@ -154,9 +154,7 @@ class SceneGeometry:
             slots=np.vstack([formation.start_slots, formation.goal_slots]),
             stations=np.array(stations, float).reshape(-1, 2),
             station_names=names,
-            ground_users=np.array([[u.x, u.y] for u in mission.ground_users], float).reshape(
-                -1, 2
-            ),
+            ground_users=np.array([[u.x, u.y] for u in mission.ground_users], float).reshape(-1, 2),
             fleet_size=int(formation.fleet_size),
         )
 
@@ -249,9 +247,7 @@ def static_entities(geometry: SceneGeometry) -> list[SceneEntity]:
         SceneEntity(
             frame_id=MAP_FRAME,
             id="obstacles",
-            triangles=[
-                TriangleListPrimitive(pose=_pose(), points=_points(triangles), color=GREY)
-            ]
+            triangles=[TriangleListPrimitive(pose=_pose(), points=_points(triangles), color=GREY)]
             if len(triangles)
             else [],
             lines=[_line_list(_with_z(margins.reshape(-1, 2), cruise), MARGIN_RED, 0.3)]
@@ -275,8 +271,9 @@ def static_entities(geometry: SceneGeometry) -> list[SceneEntity]:
                 _line_list(rows, ROW_BLUE, 0.4),
             ],
             spheres=[
-                SpherePrimitive(pose=_pose(x, y, 0.3), size=Vector3(x=1.0, y=1.0, z=1.0),
-                                color=ROW_BLUE)
+                SpherePrimitive(
+                    pose=_pose(x, y, 0.3), size=Vector3(x=1.0, y=1.0, z=1.0), color=ROW_BLUE
+                )
                 for x, y in g.slots.tolist()
             ],  # fmt: skip
         )
@@ -313,8 +310,9 @@ def static_entities(geometry: SceneGeometry) -> list[SceneEntity]:
                 frame_id=MAP_FRAME,
                 id="ground_users",
                 cubes=[
-                    CubePrimitive(pose=_pose(x, y, 1.0), size=Vector3(x=2.0, y=2.0, z=2.0),
-                                  color=USER_PURPLE)
+                    CubePrimitive(
+                        pose=_pose(x, y, 1.0), size=Vector3(x=2.0, y=2.0, z=2.0), color=USER_PURPLE
+                    )
                     for x, y in g.ground_users.tolist()
                 ],  # fmt: skip
             )
@@ -355,9 +353,7 @@ def static_entities(geometry: SceneGeometry) -> list[SceneEntity]:
                     )
                 ],
                 spheres=[
-                    SpherePrimitive(
-                        pose=_pose(), size=Vector3(x=0.6, y=0.6, z=0.6), color=colour
-                    )
+                    SpherePrimitive(pose=_pose(), size=Vector3(x=0.6, y=0.6, z=0.6), color=colour)
                 ],
             )
         )
@@ -388,12 +384,11 @@ def radio_links(
 
 
 def links_update(
-    positions: np.ndarray, stations: np.ndarray, radio_range: float
-) -> tuple[bytes, int]:
-    """The `radio_links` entity (every link of this instant, one line list) encoded, and the
-    number of links. An empty list replaces the previous links."""
+    positions: np.ndarray, stations: np.ndarray, pairs: np.ndarray, reach: np.ndarray
+) -> bytes:
+    """The `radio_links` entity (every link of `radio_links`, one line list), encoded. An
+    empty list replaces the previous links."""
     xyz = np.asarray(positions, float)
-    pairs, reach = radio_links(xyz, stations, radio_range)
     ends = [xyz[pairs[:, 0]], xyz[pairs[:, 1]]]
     if len(reach):
         ends[0] = np.vstack([ends[0], xyz[reach[:, 0]]])
@@ -404,7 +399,7 @@ def links_update(
         id="radio_links",
         lines=[_line_list(segments, LINK_GREEN, 0.3)] if len(segments) else [],
     )
-    return SceneUpdate(entities=[entity]).encode(), len(segments)
+    return SceneUpdate(entities=[entity]).encode()
 
 
 def transforms(

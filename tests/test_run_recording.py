@@ -2,9 +2,18 @@
 
 from __future__ import annotations
 
+import base64
 import json
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.reader import make_reader
@@ -135,3 +144,372 @@ def test_never_anchored_records_are_still_written(tmp_path: Path):
     recorder.close()
     _, messages, _, _ = read(path)
     assert [m[0] for m in messages] == ["/events"]
+
+
+# --------------------------------------------------------------------------- the run's context
+SMALL = Path(__file__).resolve().parents[1] / "examples" / "small.yaml"
+#: A building south-east of the small mission's path, as lon/lat (a 25 m square).
+BUILDING = [
+    [4.838270849664592, 45.763100283261664],
+    [4.8385922058725255, 45.76310027557895],
+    [4.8385922174947344, 45.763325197545974],
+    [4.838270859995443, 45.76332520522871],
+    [4.838270849664592, 45.763100283261664],
+]
+
+
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory):
+    """The small mission plus a GeoJSON building, planned (the recorder's `describe` input)."""
+    from gcs.mission import load_mission
+    from gcs.planning import plan_json, plan_mission
+
+    folder = tmp_path_factory.mktemp("mission")
+    building = {
+        "type": "FeatureCollection",
+        "features": [
+            {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [BUILDING]}}
+        ],
+    }
+    (folder / "blocks.geojson").write_text(json.dumps(building))
+    text = SMALL.read_text().replace("obstacles:\n", "obstacles:\n  - geojson: blocks.geojson\n", 1)
+    (folder / "mission.yaml").write_text(text)
+    mission = load_mission(folder / "mission.yaml")
+    plan = plan_mission(mission)
+    assert plan.valid, plan.reason
+    return mission, plan, plan_json(plan), folder
+
+
+def _anchored_clock() -> tuple[MissionClock, FakeWall]:
+    wall = FakeWall()
+    clock = MissionClock(speedup=1.0, monotonic=wall, unix_ns=lambda: 1_700_000_000_000_000_000)
+    clock.anchor(wall.now, 0.0)
+    return clock, wall
+
+
+def test_describe_makes_the_recording_self_contained(tmp_path: Path, planned):
+    from gcs.geodesy import lonlat_to_local
+    from gcs.scene import DISPLAY_HEIGHT_FACTOR
+
+    mission, plan, plan_data, folder = planned
+    clock, wall = _anchored_clock()
+    path = tmp_path / "run.mcap"
+    recorder = FlightRecorder(path, clock)
+    recorder.describe(plan, plan_data, wall.now)
+    recorder.outcome({"completed": True, "exit_status": 0, "reason": None, "fleet_size": 4})
+    recorder.close()
+
+    with open(path, "rb") as handle:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory(), JsonDecoderFactory()])
+        attachments = {a.name: a.data for a in reader.iter_attachments()}
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+        decoded = {}
+        for schema, channel, _, message in reader.iter_decoded_messages():
+            decoded.setdefault(channel.topic, (schema.name, schema.encoding, message))
+    assert attachments["mission.yaml"] == mission.text.encode()
+    assert attachments["geojson/blocks.geojson"] == (folder / "blocks.geojson").read_bytes()
+    assert json.loads(attachments["plan.json"]) == plan_data
+    assert json.loads(attachments["run.json"])["completed"] is True
+    assert metadata["mission"]["name"] == "small"
+    assert metadata["mission"]["fleet_size"] == str(plan.fleet_size)
+    assert json.loads(metadata["outcome"]["completed"]) is True
+    assert decoded["/plan"][:2] == ("fleetline.Plan", "jsonschema")
+
+    # the 3-D scene: every part, obstacles extruded over their whole footprint
+    name, encoding, update = decoded["/scene"]
+    assert (name, encoding) == ("foxglove.SceneUpdate", "protobuf")
+    entities = {e.id: e for e in update.entities}
+    size = plan.fleet_size
+    expected = {"obstacles", "plan", "station/A", "station/B"}
+    expected |= {f"uav{n}" for n in range(1, size + 1)}
+    expected |= {f"uav{n}/target" for n in range(1, size + 1)}
+    assert expected <= set(entities)
+    assert all(entities[f"uav{n}"].frame_locked for n in range(1, size + 1))
+    triangles = np.array(
+        [[p.x, p.y, p.z] for p in entities["obstacles"].triangles[0].points]
+    ).reshape(-1, 3, 3)
+    height = DISPLAY_HEIGHT_FACTOR * mission.altitude
+    tops = triangles[np.all(triangles[:, :, 2] == height, axis=1)]
+    edge1, edge2 = tops[:, 1, :2] - tops[:, 0, :2], tops[:, 2, :2] - tops[:, 0, :2]
+    top_area = np.abs(edge1[:, 0] * edge2[:, 1] - edge1[:, 1] * edge2[:, 0]).sum() / 2
+    footprint = sum(g.area for g in mission.obstacles.geometries)
+    assert top_area == pytest.approx(footprint, rel=1e-9)
+    margin = np.array([[p.x, p.y] for p in entities["obstacles"].lines[0].points])
+    assert mission.obstacles.distance_to_points(margin).min() == pytest.approx(
+        mission.safety_margin, abs=1e-6
+    )
+    path = np.array([[p.x, p.y] for p in entities["plan"].lines[0].points])
+    assert np.array_equal(path, np.array(plan_data["path"]))
+
+    # the Map panel's layers: footprints back in lon/lat, the mission's own building exactly
+    name, encoding, layer = decoded["/map/obstacles"]
+    assert (name, encoding) == ("foxglove.GeoJSON", "protobuf")
+    features = json.loads(layer.geojson)["features"]
+    assert len(features) == len(mission.obstacles.geometries)
+    by_name = {f["properties"]["name"]: f["geometry"] for f in features}
+    (key,) = [k for k in by_name if "features[0]" in k]
+    assert np.allclose(by_name[key]["coordinates"][0], BUILDING, atol=1e-9)
+    (rectangle,) = [k for k in by_name if "rectangle" in k]
+    corners = lonlat_to_local(np.array(by_name[rectangle]["coordinates"][0]), mission.origin)
+    assert np.allclose(corners[:-1], mission.obstacles.polygons[1], atol=1e-6)
+    plan_layer = json.loads(decoded["/map/plan"][2].geojson)["features"]
+    assert plan_layer[0]["geometry"]["type"] == "LineString"
+
+
+def test_the_fleet_moves_frames_and_links_at_every_tick(tmp_path: Path, planned):
+    from gcs.scene import MAST_HEIGHT_M
+
+    _, plan, plan_data, _ = planned
+    clock, wall = _anchored_clock()
+    path = tmp_path / "run.mcap"
+    recorder = FlightRecorder(path, clock)
+    recorder.describe(plan, plan_data, wall.now)
+    size = plan.fleet_size
+    positions = np.full((size, 3), np.nan)
+    positions[0] = [0.0, 0.0, 20.0]  # at A
+    positions[1] = [100.0, 0.0, 20.0]  # 100 m from UAV 1, 100 m from A: within 120 m
+    positions[2] = [350.0, 100.0, 20.0]  # 50 m beyond B, alone with it
+    targets = np.zeros((size, 2))
+    recorder.fleet(1.0, positions, targets, wall.now + 1.0)
+    recorder.close()
+    with open(path, "rb") as handle:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory(), JsonDecoderFactory()])
+        last = {}
+        for _, channel, _, message in reader.iter_decoded_messages():
+            last[channel.topic] = message
+    frames = {t.child_frame_id: t for t in last["/tf"].transforms}
+    assert set(frames) == {"uav1", "uav2", "uav3"} | {f"uav{n}/target" for n in range(1, size + 1)}
+    assert (frames["uav2"].translation.x, frames["uav2"].translation.z) == (100.0, 20.0)
+    assert all(t.rotation.w == 1.0 for t in frames.values())  # a rotation, not the zero default
+    entities = {e.id: e for e in last["/scene"].entities}
+    assert "obstacles" in entities  # every /scene message is complete
+    points = [(p.x, p.y, p.z) for p in entities["radio_links"].lines[0].points]
+    links = sorted(tuple(sorted(points[k : k + 2])) for k in range(0, len(points), 2))
+    mast = MAST_HEIGHT_M
+    assert links == sorted(
+        [
+            ((0.0, 0.0, 20.0), (100.0, 0.0, 20.0)),  # UAV 1 - UAV 2
+            ((0.0, 0.0, mast), (0.0, 0.0, 20.0)),  # UAV 1 - A
+            ((0.0, 0.0, mast), (100.0, 0.0, 20.0)),  # UAV 2 - A
+            ((300.0, 100.0, mast), (350.0, 100.0, 20.0)),  # UAV 3 - B
+        ]
+    )
+    fleet = last["/fleet"]
+    assert fleet["uav_uav_m"] == 100.0
+    assert fleet["uav_obstacle_m"] == pytest.approx(
+        float(plan.mission.obstacles.distance_to_points(positions[:3, :2]).min())
+    )
+    assert fleet["radio_links"] == 4
+    assert fleet["uav_links"] == [[1, 2]]
+    assert sorted(map(tuple, fleet["station_links"])) == [(1, 0), (2, 0), (3, 1)]
+
+
+def test_a_killed_writer_leaves_a_file_readable_up_to_the_last_second(tmp_path: Path):
+    from gcs.logreader import read_recording
+
+    path = tmp_path / "killed.mcap"
+    script = f"""
+import sys, time
+from gcs.recording import FlightRecorder
+from gcs.runtime import MissionClock
+clock = MissionClock()
+clock.anchor(time.monotonic(), 0.0)
+recorder = FlightRecorder({str(path)!r}, clock)
+began = time.monotonic()
+last_said = 0.0
+while True:
+    now = time.monotonic()
+    t = clock.mission_time(now)
+    recorder.metrics({{"t": t}}, now)
+    if t - last_said >= 0.2:
+        last_said = t
+        print(t, flush=True)
+    time.sleep(0.005)
+"""
+    child = subprocess.Popen(
+        [sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, cwd=tmp_path
+    )
+    try:
+        said = 0.0
+        deadline = time.monotonic() + 30
+        while said < 2.5 and time.monotonic() < deadline:
+            line = child.stdout.readline()
+            assert line, "the writer died"
+            said = float(line)
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.kill()
+        child.wait()
+    recording = read_recording(path)
+    assert recording.truncated
+    times = [m["t"] for _, m in recording.messages("/metrics")]
+    assert times == sorted(times)
+    assert times[-1] >= said - 1.1  # flushed at least every second
+
+
+# --------------------------------------------------------------------------- live (WebSocket)
+def foxglove_connect(port: int, timeout: float = 10.0) -> socket.socket:
+    """A WebSocket client of Foxglove's protocol (stdlib only): the upgrade handshake."""
+    sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall(
+        (
+            f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+            "Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n"
+        ).encode()
+    )
+    head = b""
+    while b"\r\n\r\n" not in head:
+        byte = sock.recv(1)
+        assert byte, "the server closed the connection during the handshake"
+        head += byte
+    assert head.startswith(b"HTTP/1.1 101"), head
+    return sock
+
+
+def _recv_exact(sock: socket.socket, count: int) -> bytes:
+    out = b""
+    while len(out) < count:
+        chunk = sock.recv(count - len(out))
+        if not chunk:
+            raise EOFError("connection closed")
+        out += chunk
+    return out
+
+
+def foxglove_receive(sock: socket.socket) -> tuple[int, bytes]:
+    """One WebSocket frame from the server (unmasked): (opcode, payload)."""
+    first, second = _recv_exact(sock, 2)
+    size = second & 0x7F
+    if size == 126:
+        size = struct.unpack(">H", _recv_exact(sock, 2))[0]
+    elif size == 127:
+        size = struct.unpack(">Q", _recv_exact(sock, 8))[0]
+    return first & 0x0F, _recv_exact(sock, size)
+
+
+def foxglove_send(sock: socket.socket, message: dict) -> None:
+    """One masked text frame (clients must mask)."""
+    data = json.dumps(message).encode()
+    mask = os.urandom(4)
+    size = len(data)
+    head = bytes([0x81]) + (
+        bytes([0x80 | size]) if size < 126 else bytes([0x80 | 126]) + struct.pack(">H", size)
+    )
+    sock.sendall(head + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(data)))
+
+
+def foxglove_channels(sock: socket.socket, wanted: set[str], deadline: float) -> dict:
+    """Read server messages until every topic of `wanted` was advertised: topic -> channel."""
+    channels: dict[str, dict] = {}
+    while not wanted <= set(channels):
+        assert time.monotonic() < deadline, f"never advertised: {wanted - set(channels)}"
+        opcode, payload = foxglove_receive(sock)
+        if opcode == 1:
+            message = json.loads(payload)
+            if message.get("op") == "advertise":
+                channels.update({c["topic"]: c for c in message["channels"]})
+    return channels
+
+
+def test_the_recording_is_served_live_over_foxglove_websocket(tmp_path: Path):
+    clock, wall = _anchored_clock()
+    recorder = FlightRecorder(tmp_path / "live.mcap", clock, serve_port=0)
+    try:
+        recorder.event("info", "before the client", wall.now)
+        sock = foxglove_connect(recorder.server_port)
+        opcode, payload = foxglove_receive(sock)
+        assert json.loads(payload)["op"] == "serverInfo"
+        recorder.metrics({"t": 0.0}, wall.now)
+        channels = foxglove_channels(sock, {"/events", "/metrics"}, time.monotonic() + 10)
+        assert channels["/events"]["schemaName"] == "foxglove.Log"
+        assert channels["/metrics"]["schemaName"] == "fleetline.Metrics"
+        foxglove_send(
+            sock,
+            {
+                "op": "subscribe",
+                "subscriptions": [{"id": 7, "channelId": channels["/events"]["id"]}],
+            },
+        )
+        # the subscription takes effect asynchronously: log until a message comes back
+        sock.settimeout(0.05)
+        deadline = time.monotonic() + 10
+        received = None
+        while received is None and time.monotonic() < deadline:
+            recorder.event("info", "live event", wall.now)
+            try:
+                opcode, payload = foxglove_receive(sock)
+            except TimeoutError:
+                continue
+            if opcode == 2 and payload[0] == 1:  # binary message data
+                received = payload
+        assert received is not None, "no message data within 10 s"
+        assert struct.unpack("<I", received[1:5])[0] == 7  # our subscription
+        assert b"live event" in received[13:]
+        sock.close()
+    finally:
+        recorder.close()
+
+
+def test_a_taken_port_is_refused_before_the_file_is_created(tmp_path: Path):
+    from gcs.recording import LiveServerError
+
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    try:
+        with pytest.raises(LiveServerError, match=str(busy.getsockname()[1])):
+            FlightRecorder(tmp_path / "run.mcap", MissionClock(), serve_port=busy.getsockname()[1])
+    finally:
+        busy.close()
+    assert not (tmp_path / "run.mcap").exists()
+
+
+def test_mission_run_refuses_a_taken_foxglove_port_with_one_line(tmp_path, monkeypatch, capsys):
+    import gcs.cli
+
+    monkeypatch.chdir(tmp_path)
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    try:
+        port = str(busy.getsockname()[1])
+        code = gcs.cli.main(["mission", "run", str(SMALL), "--json", "--foxglove", port])
+    finally:
+        busy.close()
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and "--foxglove" in err and port in err
+    assert not list(tmp_path.rglob("*.mcap"))
+
+
+def test_radio_counters_reach_the_report(tmp_path: Path, planned):
+    """With a radio medium's counters in the log, the report draws them (figs. 12-13)."""
+    from gcs.logreader import read_recording
+    from gcs.report import FIGURES, write_report
+
+    _, plan, plan_data, _ = planned
+    clock, wall = _anchored_clock()
+    path = tmp_path / "radio.mcap"
+    recorder = FlightRecorder(path, clock)
+    recorder.describe(plan, plan_data, wall.now)
+    size = plan.fleet_size
+    slots = plan.formation.start_slots
+    for k in range(5):
+        t = 0.1 * k
+        recorder.metrics({"t": t, "positions": slots.tolist()}, wall.now + t)
+        packets = {"sent": 10 * k, "received": 9 * k, "dropped": k}
+        users = {"sent": 4 * k, "received": 3 * k, "dropped": k}
+        recorder.radio({"t": t, "packets": packets, "ground_users": users}, wall.now + t)
+    recorder.close()
+    report = write_report(read_recording(path), tmp_path / "report")
+    assert report.summary["radio"]["packets"] == {"sent": 40, "received": 36, "dropped": 4}
+    assert report.summary["samples"] == 5
+    # parked on their slots: the smallest distance is the slot spacing dS_c = 2 sqrt 2 rho_c
+    spacing = 2 * np.sqrt(2) * plan.mission.safety_margin
+    assert report.summary["min_uav_uav_m"] == pytest.approx(spacing)
+    assert report.summary["connected_fraction"] == 1.0
+    assert report.summary["tracking_error_m"] == [None] * size
+    for name in FIGURES:
+        assert (tmp_path / "report" / name).read_bytes().startswith(b"\x89PNG")

@@ -108,8 +108,66 @@ def test_arming_refused_is_reported_and_retried_after_a_back_off():
         arms = commands(flight, 400)
         assert len(arms) == 3 and model.armed
         gaps = np.diff([a.t for a in arms])
-        backoff = flight.driver.timing.wall(flight.driver.refusal_backoff_s)
-        assert np.all(gaps >= backoff * 0.9), gaps  # never at the tick rate
+        driver = flight.driver
+        backoff = [driver.timing.wall(driver.retry_policy.refusal.delay(n)) for n in (1, 2)]
+        assert np.all(gaps >= np.array(backoff) * 0.9), gaps  # never at the tick rate
+
+
+def sent(flight: Flight, type_name: str, what=lambda m: True) -> list:
+    """What the fake sent of one message type (and `what` selects), in order."""
+    with flight.fake.lock:
+        return [
+            e for e in flight.fake.exchanges
+            if e.direction == "tx" and e.message.get_type() == type_name and what(e.message)
+        ]  # fmt: skip
+
+
+def test_refusal_reason_is_the_warning_just_after_the_ack_never_an_info_text():
+    # The reason comes 5 ms after the refusing ACK; an INFO text comes with the ACK.
+    model = copter(
+        extra_arm_refusals=1,
+        refusal_text_delay_s=0.005,
+        info_text_with_refusals="EKF3 IMU0 is using GPS",
+    )
+    with start(model) as flight:
+        take_off(flight)
+        (refused,) = sent(flight, "COMMAND_ACK", lambda m: m.command == 400 and m.result == 4)
+        (reason,) = sent(flight, "STATUSTEXT", lambda m: m.text.startswith("Arm:"))
+        assert reason.t > refused.t  # on the wire: the text after the ACK
+        refusals = [t for t in flight.texts("command") if t.startswith("arming refused")]
+        assert refusals == ["arming refused: Arm: Need Position Estimate"]
+        assert len(commands(flight, 400)) == 2 and model.armed
+
+
+def test_arming_timeout_names_the_refusal_not_the_last_info_text():
+    # Every ARM is refused; each refusal comes with an INFO text sent after its reason.
+    model = copter(extra_arm_refusals=10**6, info_text_with_refusals="EKF3 IMU0 is using GPS")
+    with start(model) as flight:
+        flight.driver.takeoff(ALTITUDE, time.monotonic())
+        assert flight.run_until(lambda: flight.driver.phase == Phase.FAILED, 10.0)
+        assert flight.driver.last_statustext() == "EKF3 IMU0 is using GPS"  # the trap
+        assert flight.driver.failure_reason == "could not arm: Arm: Need Position Estimate"
+        assert not model.armed
+
+
+def test_home_position_requests_are_paced_until_the_ekf_origin():
+    # Before its EKF origin (+19 s) ArduPilot acknowledges REQUEST_MESSAGE(HOME_POSITION) and
+    # sends nothing: the driver waits, then asks again later and later, never at its tick rate.
+    model = copter(speedup=10.0)  # origin at 1.9 s wall
+    with start(model) as flight:
+        driver = flight.driver
+        assert flight.run_until(lambda: driver.telemetry.home_enu is not None, 5.0)
+        requests = [
+            e for e in commands(flight, 512) if e.message.param1 == 242
+        ]  # fmt: skip
+        acked = sent(flight, "COMMAND_ACK", lambda m: m.command == 512 and m.result == 0)
+        assert len(acked) >= len(requests) >= 3  # each answered, none brought a home
+        pacing = driver.retry_policy.home_request
+        wall = driver.timing.wall
+        expected = [wall(pacing.first_s) + wall(pacing.delay(n)) for n in range(1, len(requests))]
+        gaps = np.diff([e.t for e in requests])
+        assert np.all(gaps >= 0.9 * np.array(expected)), (gaps, expected)
+        assert gaps[-1] > gaps[0]  # the back-off grows
 
 
 def test_mode_refused_is_reported_with_the_vehicles_reason():

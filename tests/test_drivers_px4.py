@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from gcs.drivers.base import Phase
+from gcs.drivers.base import FlightMode, Phase
 from gcs.geodesy import Origin
 from tests.fakes.flight import Flight, SinkDriver, home_of, hover, leg
 from tests.fakes.px4 import (
@@ -35,12 +35,14 @@ RELATIVE = ALTITUDE - HOME_UP
 
 
 def start(model: Px4Model) -> Flight:
-    return Flight.start("px4", model, origin=ORIGIN, slot=SLOT, altitude=ALTITUDE, speedup=SPEEDUP)
+    return Flight.start(
+        "px4", model, origin=ORIGIN, slot=SLOT, altitude=ALTITUDE, speedup=model.speedup
+    )
 
 
-def px4(**kwargs) -> Px4Model:
+def px4(speedup: float = SPEEDUP, **kwargs) -> Px4Model:
     kwargs.setdefault("home", home_of(ORIGIN, SLOT, HOME_UP))
-    return Px4Model(speedup=SPEEDUP, seed=3, **kwargs)
+    return Px4Model(speedup=speedup, seed=3, **kwargs)
 
 
 def received(flight: Flight, command: int) -> list:
@@ -130,6 +132,53 @@ def test_offboard_without_stream_refuses_arming_and_the_driver_retries_with_it()
         assert results[0] == 1 and results[-1] == 0  # TEMPORARILY_REJECTED, then ACCEPTED
 
 
+def test_refused_arming_is_retried_with_a_growing_back_off():
+    # OFFBOARD without a stream (P1 7.76): every ARM is TEMPORARILY_REJECTED.
+    model = px4(speedup=8.0, initial_mode=OFFBOARD)
+    with start(model) as flight:
+        driver = flight.driver
+        flight.stream_paused = True
+        flight.follow(hover((*SLOT, ALTITUDE)))
+        driver.takeoff(ALTITUDE, time.monotonic())
+        assert flight.run_until(lambda: len(received(flight, 400)) >= 4, 6.0), driver.phase
+        assert [a.message.result for a in acks(flight, 400)][:3] == [1, 1, 1]
+        refusals = [t for t in flight.texts("command") if t.startswith("arming refused")]
+        assert refusals[:3] == [f"arming refused: {ARM_DENIED_TEXT.strip()}"] * 3
+        gaps = np.diff([a.t for a in received(flight, 400)])
+        wall, backoff = driver.timing.wall, driver.retry_policy.refusal
+        expected = np.array([wall(backoff.delay(n)) for n in (1, 2, 3)])  # 0.25, 0.25, 0.5 s
+        assert np.all(gaps >= 0.9 * expected), (gaps, expected)
+        assert gaps[2] >= 1.5 * gaps[0]  # it grows
+        assert not model.armed
+
+
+def test_mode_change_the_heartbeat_never_shows_is_asked_again_slowly():
+    # PX4 acknowledges OFFBOARD twice ACCEPTED and stays in Hold (as P2 4.58 for an unknown
+    # mode): the driver waits for the heartbeat, then asks again after a growing back-off,
+    # never at its tick rate (the heartbeat comes at 1 Hz of vehicle time).
+    model = px4(speedup=4.0, ignored_modes=frozenset({OFFBOARD}))
+    with start(model) as flight:
+        driver = flight.driver
+        flight.follow(hover((*SLOT, ALTITUDE)))
+        driver.takeoff(ALTITUDE, time.monotonic())
+        assert flight.run_until(lambda: len(received(flight, 176)) >= 3, 6.0), driver.phase
+        modes = received(flight, 176)
+        assert all((m.message.param2, m.message.param3) == (6, 0) for m in modes)
+        assert [a.message.result for a in acks(flight, 176)][:4] == [0, 0, 0, 0]
+        elapsed = modes[-1].t - modes[0].t
+        assert len(modes) <= 1 + 3 * elapsed  # at most 3 per second
+        wall, policy = driver.timing.wall, driver.retry_policy
+        expected = np.array(
+            [wall(policy.confirm_s) + wall(policy.refusal.delay(n)) for n in (1, 2)]
+        )  # 0.625 + 0.25, 0.625 + 0.5 s
+        gaps = np.diff([m.t for m in modes])
+        assert np.all(gaps >= 0.9 * expected), (gaps, expected)
+        unconfirmed = "mode guided: accepted, but the heartbeat did not show it"
+        assert unconfirmed in flight.texts("command")
+        assert driver.phase == Phase.ARMING and driver.current_mode() == FlightMode.HOLD
+        assert not received(flight, 400)  # no ARM outside OFFBOARD
+
+
 def test_offboard_loss_failsafe_is_an_event_and_offboard_comes_back_with_the_stream():
     model = px4()
     with start(model) as flight:
@@ -143,7 +192,8 @@ def test_offboard_loss_failsafe_is_an_event_and_offboard_comes_back_with_the_str
         assert flight.texts("failsafe") == [
             "the vehicle left guided flight by itself: mode POSCTL (offboard-loss failsafe)"
         ]
-        assert "Failsafe activated" in flight.texts("statustext")
+        # PX4 says so 9 ms after switching (P1 44.32-44.33): maybe after the heartbeat showed it.
+        assert flight.run_until(lambda: "Failsafe activated" in flight.texts("statustext"), 1.0)
 
         # Resuming: PX4 refuses OFFBOARD until the stream flows again, then takes it back.
         driver.resume(time.monotonic())

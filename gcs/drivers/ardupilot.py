@@ -13,6 +13,9 @@
   targets never time out in GUIDED (GUID_TIMEOUT applies to velocity/acceleration targets
   only): if the GCS stops, the copter hovers at the last target, so the runtime's monitors are
   what notice. Landing is LAND mode, and ArduPilot disarms by itself after touch-down.
+* Refusals (`Arm: Need Position Estimate`, `No such mode 17`) are reported with that text and
+  tried again after a growing back-off; an INFO text near the ACK (`Arming motors`) never
+  counts as the reason.
 * A mode change the copter makes by itself (GCS/battery failsafe: RTL, LAND, ...) during
   guided flight is reported as a `failsafe` event.
 """
@@ -22,7 +25,7 @@ from __future__ import annotations
 from typing import ClassVar
 
 from gcs.drivers.autopilot import AutopilotDriver
-from gcs.drivers.base import CommandSpec, FlightMode, Phase, mavlink
+from gcs.drivers.base import CommandSpec, FlightMode, Phase, RetryPolicy, mavlink
 
 #: Copter mode numbers (HEARTBEAT custom_mode) the driver uses.
 STABILIZE, GUIDED, LOITER, RTL, LAND, BRAKE, SMART_RTL = 0, 4, 5, 6, 9, 17, 21
@@ -50,6 +53,11 @@ class ArduPilotDriver(AutopilotDriver):
     initialise_timeout_s = 120.0
     arming_timeout_s = 20.0
     takeoff_timeout_s = 120.0
+    #: A mode change shows in a HEARTBEAT sent at once, an accepted ARM in the next one (A1:
+    #: 42.61 -> 42.94); the `Arm: ...` / `No such mode` text comes within 1 ms of the refusing
+    #: ACK, before it on the recorded link. HOME_POSITION is acknowledged but not sent before
+    #: the EKF origin (+19 s from boot).
+    retry_policy = RetryPolicy(confirm_s=2.0, reason_before_s=0.1, reason_after_s=0.3)
 
     stream_rates_hz: ClassVar[dict[int, float]] = {
         mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,

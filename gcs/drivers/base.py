@@ -8,8 +8,9 @@ chosen once, from `fleet.backend`, in `gcs/drivers/__init__.py` (never from the 
 Non-blocking state machine. The runtime runs ONE scheduler loop for the whole fleet; it calls
 
 * `on_message(msg, now)` for every valid message its `Link` received from this UAV,
-* `step(now)` once per tick: advances the handshake, retransmits pending commands until their
-  `COMMAND_ACK`, times out, sends the GCS heartbeat,
+* `step(now)` once per tick: sends the GCS heartbeat, advances the commands in flight
+  (`gcs.drivers.commands`: retransmission, refusal reasons, confirmation, back-off), then the
+  phase,
 * the requests `takeoff(altitude)`, `land()`, `hold()`, `resume()`, `send_setpoint(...)` and
   `send_speed_change(change)`, which only send or queue and return at once.
 
@@ -22,6 +23,15 @@ arming (guided/offboard mode, then arm) -> taking_off -> following (airborne, st
 holding -> landing -> landed; failed (with `failure_reason`) from anywhere. `takeoff()` may be
 called early: it is carried out as soon as the UAV is ready.
 
+Commands and modes. Every command goes through the driver's `CommandTracker`
+(`send_command`): retransmitted with exponential back-off until its final COMMAND_ACK, a
+refusal explained by the vehicle's STATUSTEXT (WARNING or worse) from just before to just after
+the ACK, an ARM or mode change confirmed only when the heartbeat shows it, and a failed try
+(refused, unanswered, not shown) followed by a back-off before the same key is sent again. The
+pacing is the family's `retry_policy` (`RetryPolicy`, vehicle-time seconds). A mode the driver
+asked for (`request_mode`, or guided while arming) is its *mode goal*: asked again, paced,
+until a heartbeat shows it; a later change of mode is the vehicle's own decision.
+
 What a family subclass MUST implement
 -------------------------------------
 * `family` (class attribute): the `fleet.backend` name (`"sim"`, `"ardupilot"`, `"px4"`).
@@ -31,19 +41,34 @@ What a family subclass MUST implement
 * `takeoff_command(relative_altitude) -> CommandSpec | None`: `None` means the family takes
   off by following the setpoint stream (PX4 OFFBOARD).
 
-It MAY override:
-* capability properties below (defaults are a plain, well-behaved autopilot);
-* `on_connected(now)`: after the first heartbeat (e.g. `MAV_CMD_SET_MESSAGE_INTERVAL`);
-* `position_ready() -> bool`: usable position estimate for arming (default: a position and a
-  home are known; ArduPilot adds the EKF / pre-arm bit);
-* `on_family_message(msg, now)`: messages the base does not handle (EKF_STATUS_REPORT, EVENT);
-* `command_ack_is_final(pending, ack) -> bool`: PX4's double acknowledgement of DO_SET_MODE;
-* `landing_command()`: default `mode_command(FlightMode.LAND)`.
+What it MAY override (defaults: a plain, well-behaved autopilot)
+----------------------------------------------------------------
+* `retry_policy` (class attribute, a `RetryPolicy`): retransmission, back-off after a refusal,
+  confirmation time, HOME_POSITION pacing, the window in which a STATUSTEXT explains a refusal.
+* Capability properties: `accepts_acceleration_feedforward`,
+  `needs_setpoint_stream_before_offboard`, `acks_set_mode`, `setpoints_time_out_on_vehicle`,
+  `honours_speed_change_time`, `home_tolerance_m`.
+* `on_connected(now)`: once, after the first heartbeat (e.g. `MAV_CMD_SET_MESSAGE_INTERVAL`).
+* `position_ready()`: the position estimate allows arming (ArduPilot adds EKF, pre-arm bit).
+* `arm_allowed(now)`: an ARM may be sent now, the guided mode being shown (PX4: pre-arm bit).
+* `mode_request(mode)`: the command of a mode request (default `mode_command`; LAND:
+  `landing_command()`, default `mode_command(LAND)`, PX4 MAV_CMD_NAV_LAND).
+* `mode_request_allowed(mode, now)`: a paced (re)request may go now (default: guided waits
+  for the setpoint stream when `needs_setpoint_stream_before_offboard`).
+* `on_mode_result(mode, outcome, now)`, `on_arm_result(outcome, now)`: a mode change or an
+  ARM ended (default: report a refusal with its reason, or a change never shown).
+* `on_mode_changed(previous, now)`: the heartbeat's logical mode changed (failsafes).
+* `on_family_message(msg, now)`: messages the base does not handle (EKF_STATUS_REPORT, EVENT).
+* `on_heartbeat_sent(now)`: after each GCS heartbeat (periodic family traffic).
+* `command_ack_is_final(pending, ack)`: PX4's double acknowledgement of DO_SET_MODE.
+* `_step_<phase>(now)` (`_step_connecting` ... `_step_failed`): advances one phase; `step`
+  calls the current phase's.
 
-The shared helpers every family needs live here: `send_command` (COMMAND_LONG or COMMAND_INT,
-retransmitted until a final COMMAND_ACK, refusals reported with the STATUSTEXT that explains
-them), STATUSTEXT capture with chunk reassembly, telemetry in the mission's local ENU frame
-(through `gcs.geodesy`), the GCS heartbeat, setpoint encoding, and leader speed requests.
+Helpers a family uses (and the runtime does not): `send_command`, `may_send`, `request_mode`,
+`mode_goal`, `mode_since`, `stream_flowing`, `note_vehicle_text`, `report_refusal`,
+`last_refusal`, `set_phase`, `emit`, `fail`, `time_boot_ms`. The shared machinery lives here too: STATUSTEXT capture with chunk reassembly,
+telemetry in the mission's local ENU frame (through `gcs.geodesy`), the GCS heartbeat, setpoint
+encoding, and leader speed requests.
 """
 
 from __future__ import annotations
@@ -58,9 +83,41 @@ from typing import ClassVar
 
 import numpy as np
 
+from gcs.drivers.commands import (
+    REASON_SEVERITY,
+    Backoff,
+    CommandCallback,
+    CommandSpec,
+    CommandTracker,
+    Outcome,
+    Pending,
+    RetryPolicy,
+    VehicleTexts,
+)
 from gcs.geodesy import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs.link import Link, mavutil
 from gcs.speed import SpeedChange
+
+__all__ = [
+    "AIRBORNE_PHASES",
+    "Backoff",
+    "CommandSpec",
+    "Driver",
+    "DriverEvent",
+    "DriverTiming",
+    "ExternalFleet",
+    "Fleet",
+    "FleetProblem",
+    "FlightMode",
+    "LeaderRequest",
+    "Outcome",
+    "Pending",
+    "PendingCommand",
+    "Phase",
+    "RetryPolicy",
+    "Telemetry",
+    "UavSpec",
+]
 
 log = logging.getLogger(__name__)
 
@@ -76,6 +133,9 @@ MASK_POSITION_VELOCITY_ACCELERATION = IGNORE_YAW  # 3072
 
 #: SYS_STATUS health bit the autopilots set when pre-arm checks pass.
 PREARM_CHECK_BIT = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+
+#: A command waiting for its outcome (the name the interface used before `Pending`).
+PendingCommand = Pending
 
 
 class Phase(enum.Enum):
@@ -137,48 +197,6 @@ class UavSpec:
     start_slot: np.ndarray
     goal_slot: np.ndarray
     altitude: float
-
-
-@dataclass(frozen=True)
-class CommandSpec:
-    """A MAVLink command to send as COMMAND_LONG (default) or COMMAND_INT.
-
-    For COMMAND_INT, params 5-7 are `x`, `y` (integers) and `z`.
-    """
-
-    command: int
-    params: tuple[float, ...] = (0, 0, 0, 0, 0, 0, 0)
-    use_int: bool = False
-    frame: int = mavlink.MAV_FRAME_GLOBAL
-    label: str = ""
-    retry_s: float = 1.0  # vehicle-time seconds between retransmissions
-    max_attempts: int | None = 5  # None: until acknowledged or cancelled
-    acks_needed: int = 1  # PX4 answers DO_SET_MODE twice
-    key: object = None  # identifies the command among pending ones (default: command id)
-
-    @property
-    def name(self) -> str:
-        if self.label:
-            return self.label
-        entry = mavlink.enums["MAV_CMD"].get(self.command)
-        return entry.name if entry else str(self.command)
-
-
-#: Result of a command: the final MAV_RESULT, or None when every attempt went unanswered.
-CommandCallback = Callable[[int | None, float], None]
-
-
-@dataclass
-class PendingCommand:
-    """A command waiting for its final COMMAND_ACK."""
-
-    spec: CommandSpec
-    on_result: CommandCallback | None
-    first_sent: float
-    last_sent: float
-    attempts: int = 1
-    acks: int = 0  # ACCEPTED acks received so far
-    in_progress: bool = False
 
 
 @dataclass(frozen=True)
@@ -249,6 +267,12 @@ class Driver(ABC):
     takeoff_altitude_tolerance_m: ClassVar[float] = 1.0
     #: Period (vehicle time) of the GCS heartbeat sent to the UAV.
     heartbeat_period_s: ClassVar[float] = 1.0
+    #: Pacing of commands, refusals, confirmations (see `RetryPolicy`).
+    retry_policy: ClassVar[RetryPolicy] = RetryPolicy()
+    #: Setpoints flowing without a gap for this long (vehicle time) make a stream...
+    stream_established_s: ClassVar[float] = 0.5
+    #: ... and a gap longer than this (vehicle time) starts a new one.
+    stream_gap_s: ClassVar[float] = 0.5
 
     def __init__(self, spec: UavSpec, link: Link, timing: DriverTiming | None = None) -> None:
         self.spec = spec
@@ -258,22 +282,30 @@ class Driver(ABC):
         self.phase = Phase.CONNECTING
         self.failure_reason: str | None = None
         self.phase_since: float | None = None
-        self.statustexts: list[tuple[float, int, str]] = []
+        #: Wall time the heartbeat's logical mode last changed (None before a heartbeat).
+        self.mode_since: float | None = None
+        #: (wall time, reason) of the last refused ARM or mode change.
+        self.last_refusal: tuple[float, str] | None = None
+        self.texts = VehicleTexts()
+        #: (wall time, severity, text) of every STATUSTEXT, chunks joined.
+        self.statustexts: list[tuple[float, int, str]] = self.texts.entries
+        self.commands = CommandTracker(
+            self.retry_policy, self.timing.wall, self._transmit, self.command_ack_is_final,
+            self.texts,
+        )  # fmt: skip
         self.speed_acks: dict[int, float] = {}  # seq -> wall time of its COMMAND_ACK
         self.speed_results: dict[int, int | None] = {}  # seq -> MAV_RESULT (None: unanswered)
         self.setpoints_sent = 0
         self._events: deque[DriverEvent] = deque()
         self._leader_requests: deque[LeaderRequest] = deque()
         self._leader_seqs: set[int] = set()
-        self._pending: dict[object, PendingCommand] = {}
-        self._chunks: dict[int, list[str]] = {}
         self._takeoff_altitude: float | None = None
         self._last_heartbeat_sent: float | None = None
         self._started: float | None = None
-        self._mode_requested: FlightMode | None = None
-        self._arm_requested = False
+        self._mode_goal: FlightMode | None = None
         self._takeoff_sent = False
-        self._first_setpoint_time: float | None = None
+        self._stream_since: float | None = None  # start of the current setpoint streak
+        self._last_setpoint: float | None = None
         #: Mission time at a wall time, once the runtime anchored its clock (None before).
         self.mission_clock: Callable[[float], float | None] = lambda now: None
 
@@ -294,6 +326,21 @@ class Driver(ABC):
         """The command that lands where the UAV is."""
         return self.mode_command(FlightMode.LAND)
 
+    def mode_request(self, mode: FlightMode) -> CommandSpec:
+        """The command sent to put the vehicle in `mode` (LAND: `landing_command`)."""
+        return self.landing_command() if mode == FlightMode.LAND else self.mode_command(mode)
+
+    def mode_request_allowed(self, mode: FlightMode, now: float) -> bool:
+        """Whether a paced (re)request of `mode` may be sent now: guided waits for the setpoint
+        stream on families that `needs_setpoint_stream_before_offboard`."""
+        if mode == FlightMode.GUIDED and self.needs_setpoint_stream_before_offboard:
+            return self.stream_flowing(now)
+        return True
+
+    def arm_allowed(self, now: float) -> bool:
+        """Whether an ARM may be sent now (the heartbeat already shows the guided mode)."""
+        return True
+
     def on_connected(self, now: float) -> None:
         """Called once, after the first heartbeat (request streams, versions...)."""
         return None
@@ -310,7 +357,39 @@ class Driver(ABC):
         """Called after each GCS heartbeat (periodic family traffic, e.g. the sim's clock)."""
         return None
 
-    def command_ack_is_final(self, pending: PendingCommand, ack) -> bool:
+    def on_mode_changed(self, previous: FlightMode | None, now: float) -> None:
+        """The heartbeat's logical mode changed from `previous` to `current_mode()`; called
+        before the mode goal is checked (`mode_goal` is still what the driver asked for)."""
+        return None
+
+    def on_mode_result(self, mode: FlightMode, outcome: Outcome, now: float) -> None:
+        """A mode request ended; report a refusal (with the vehicle's reason) or a change the
+        heartbeat never showed. The mode goal is retried after the back-off either way."""
+        if outcome.refused:
+            severity = mavlink.MAV_SEVERITY_ERROR if mode == FlightMode.LAND else None
+            self.report_refusal(f"mode {mode.value} refused", outcome, now, severity)
+        elif outcome.result is not None and not outcome.confirmed:
+            self.emit(
+                "command",
+                f"mode {mode.value}: accepted, but the heartbeat did not show it",
+                now,
+                mavlink.MAV_SEVERITY_WARNING,
+            )
+
+    def on_arm_result(self, outcome: Outcome, now: float) -> None:
+        """An ARM ended; report a refusal or an arming the heartbeat never showed. Arming is
+        tried again after the back-off, until the arming timeout."""
+        if outcome.refused:
+            self.report_refusal("arming refused", outcome, now)
+        elif outcome.result is not None and not outcome.confirmed:
+            self.emit(
+                "command",
+                "arming: accepted, but the heartbeat did not show the vehicle armed",
+                now,
+                mavlink.MAV_SEVERITY_WARNING,
+            )
+
+    def command_ack_is_final(self, pending: Pending, ack) -> bool:
         """Whether `ack` ends `pending` (PX4 sends two acks for DO_SET_MODE)."""
         if ack.result == mavlink.MAV_RESULT_ACCEPTED:
             return pending.acks >= pending.spec.acks_needed
@@ -375,12 +454,12 @@ class Driver(ABC):
             self.telemetry.vehicle_time_s = boot_ms / 1000.0
         handler = _HANDLERS.get(kind)
         if handler is not None:
-            handler(self, msg, now)
+            getattr(self, handler)(msg, now)
         else:
             self.on_family_message(msg, now)
 
     def step(self, now: float) -> None:
-        """Advance the state machine: heartbeat, retransmissions, timeouts, next command."""
+        """Advance the state machine: heartbeat, commands in flight, the phase, the mode goal."""
         if self._started is None:
             self._started = now
             self.phase_since = now
@@ -388,10 +467,11 @@ class Driver(ABC):
             self.heartbeat_period_s, floor=0.02
         ):
             self._send_heartbeat(now)
-        self._retransmit(now)
-        advance = _PHASE_STEPS.get(self.phase)
-        if advance is not None:
-            advance(self, now)
+        for severity, text in self.texts.flush(now, self.timing.wall(0.5, floor=0.5)):
+            self._on_vehicle_text(severity, text, now)
+        self.commands.step(now)
+        getattr(self, f"_step_{self.phase.value}")(now)
+        self._pursue_mode_goal(now)
 
     def takeoff(self, altitude: float, now: float) -> None:
         """Arm and climb above the parking slot to `altitude` (m above the mission origin).
@@ -408,23 +488,23 @@ class Driver(ABC):
             return
         self._takeoff_altitude = None
         if not self.telemetry.armed and self.phase not in AIRBORNE_PHASES:
-            self._set_phase(Phase.LANDED, now, "never took off")
+            self.set_phase(Phase.LANDED, now, "never took off")
             return
-        self._cancel_pending(lambda spec: spec.command != mavlink.MAV_CMD_DO_CHANGE_SPEED)
-        self.send_command(self.landing_command(), now, self._on_land_result)
-        self._set_phase(Phase.LANDING, now)
+        self.commands.cancel(lambda spec: spec.command != mavlink.MAV_CMD_DO_CHANGE_SPEED)
+        self.request_mode(FlightMode.LAND, now)
+        self.set_phase(Phase.LANDING, now)
 
     def hold(self, now: float) -> None:
         """Hold position in the autopilot's own hold mode (the stream stops)."""
         if self.phase in (Phase.FOLLOWING, Phase.TAKING_OFF):
-            self._request_mode(FlightMode.HOLD, now)
-            self._set_phase(Phase.HOLDING, now)
+            self.request_mode(FlightMode.HOLD, now)
+            self.set_phase(Phase.HOLDING, now)
 
     def resume(self, now: float) -> None:
         """Back from hold to following the setpoint stream."""
         if self.phase == Phase.HOLDING:
-            self._request_mode(FlightMode.GUIDED, now)
-            self._set_phase(Phase.FOLLOWING, now)
+            self.request_mode(FlightMode.GUIDED, now)
+            self.set_phase(Phase.FOLLOWING, now)
 
     def send_setpoint(
         self,
@@ -448,7 +528,7 @@ class Driver(ABC):
         mask = MASK_POSITION_VELOCITY_ACCELERATION if use_acc else MASK_POSITION_VELOCITY
         acc = acceleration_enu if use_acc else (0.0, 0.0, 0.0)
         msg = self.link.mav.set_position_target_global_int_encode(
-            self._boot_ms(now),
+            self.time_boot_ms(now),
             self.spec.system_id,
             1,
             mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
@@ -467,8 +547,10 @@ class Driver(ABC):
         )
         self.link.send(msg, now)
         self.setpoints_sent += 1
-        if self._first_setpoint_time is None:
-            self._first_setpoint_time = now
+        gap = self.timing.wall(self.stream_gap_s, floor=0.3)
+        if self._last_setpoint is None or now - self._last_setpoint > gap:
+            self._stream_since = now  # a new streak
+        self._last_setpoint = now
 
     def send_speed_change(self, change: SpeedChange, now: float) -> None:
         """Broadcast leg for this UAV: COMMAND_INT DO_CHANGE_SPEED (CONTRACTS.md, MAVLink),
@@ -487,15 +569,15 @@ class Driver(ABC):
             use_int=True,
             frame=mavlink.MAV_FRAME_MISSION,
             label=f"speed change {change.seq}",
-            retry_s=0.2,
+            retry=Backoff(0.2, growth=1.0, max_s=0.2),  # time-critical: never slower
             max_attempts=None,
             key=("speed", change.seq),
         )
 
-        def done(result: int | None, when: float, seq: int = change.seq) -> None:
-            self.speed_results[seq] = result
-            if result is not None:
-                self.speed_acks.setdefault(seq, when)
+        def done(outcome: Outcome, when: float, seq: int = change.seq) -> None:
+            self.speed_results[seq] = outcome.result
+            if outcome.result is not None:
+                self.speed_acks.setdefault(seq, outcome.answered_at or when)
 
         self.send_command(spec, now, done)
 
@@ -519,7 +601,7 @@ class Driver(ABC):
 
     def close(self) -> None:
         """Forget pending commands (the link is closed by its owner)."""
-        self._pending.clear()
+        self.commands.clear()
 
     @property
     def home_altitude_amsl(self) -> float:
@@ -528,21 +610,75 @@ class Driver(ABC):
         return self.spec.origin.alt + (0.0 if home is None else float(home[2]))
 
     @property
-    def pending_commands(self) -> list[PendingCommand]:
-        return list(self._pending.values())
+    def pending_commands(self) -> list[Pending]:
+        return self.commands.pending
 
-    # ------------------------------------------------------------------ shared helpers
+    # ------------------------------------------------------------------ helpers for families
     def send_command(
-        self, spec: CommandSpec, now: float, on_result: CommandCallback | None = None
+        self,
+        spec: CommandSpec,
+        now: float,
+        on_result: CommandCallback | None = None,
+        confirm: Callable[[], bool] | None = None,
     ) -> None:
-        """Send `spec` now and retransmit it every `retry_s` until a final COMMAND_ACK.
+        """Send `spec` now through the command tracker (`gcs.drivers.commands`).
 
-        A newer command with the same key replaces a pending one. `on_result(result, now)` gets
-        the final MAV_RESULT, or None after `max_attempts` unanswered sends.
+        A newer command with the same key replaces a pending one. `on_result(outcome, now)` is
+        called once; `confirm()`, if given, must hold within the confirmation time after an
+        ACCEPTED ack for the outcome to be `accepted`.
         """
-        key = spec.key if spec.key is not None else spec.command
-        self._pending[key] = PendingCommand(spec, on_result, now, now)
-        self._transmit(spec, now)
+
+        def done(outcome: Outcome, when: float) -> None:
+            if outcome.result is None:
+                self.emit(
+                    "command",
+                    f"{spec.name}: no COMMAND_ACK after {outcome.attempts} attempts",
+                    when,
+                    mavlink.MAV_SEVERITY_WARNING,
+                )
+            if on_result is not None:
+                on_result(outcome, when)
+
+        self.commands.send(spec, now, done, confirm)
+
+    def may_send(self, key: object, now: float) -> bool:
+        """No command with this key is in flight and its back-off after a failure is over."""
+        return self.commands.may_send(key, now)
+
+    @property
+    def mode_goal(self) -> FlightMode | None:
+        """The mode the driver asked for and no heartbeat has shown yet (None: none)."""
+        return self._mode_goal
+
+    def request_mode(self, mode: FlightMode, now: float) -> None:
+        """Ask for `mode` now, and keep asking (paced, see `mode_request_allowed`) until a
+        heartbeat shows it."""
+        self._want_mode(mode)
+        self._send_mode_request(mode, now)
+
+    def stream_flowing(self, now: float) -> bool:
+        """Setpoints have been flowing without a gap for `stream_established_s`."""
+        if self._stream_since is None or self._last_setpoint is None:
+            return False
+        recent = now - self._last_setpoint <= self.timing.wall(0.3, floor=0.3)
+        return recent and now - self._stream_since >= self.timing.wall(
+            self.stream_established_s, floor=0.1
+        )
+
+    def note_vehicle_text(self, text: str, severity: int, now: float) -> None:
+        """A text from the vehicle (a family decoding e.g. PX4's EVENT adds its texts here):
+        logged as a `statustext` event, and a candidate reason for a refusal."""
+        entry = self.texts.note(severity, text, now)
+        if entry is not None:
+            self._on_vehicle_text(*entry, now)
+
+    def report_refusal(
+        self, what: str, outcome: Outcome, now: float, severity: int | None = None
+    ) -> None:
+        """Report a refused command with the vehicle's reason (remembered in `last_refusal`)."""
+        reason = outcome.describe()
+        self.last_refusal = (now, reason)
+        self.emit("command", f"{what}: {reason}", now, severity or mavlink.MAV_SEVERITY_WARNING)
 
     def emit(self, kind: str, text: str, now: float, severity: int = mavlink.MAV_SEVERITY_INFO):
         """Queue an event for the runtime (and log it)."""
@@ -555,17 +691,37 @@ class Driver(ABC):
         )
 
     def fail(self, reason: str, now: float) -> None:
-        """Give up on this UAV with a reason."""
+        """Give up on this UAV with a reason (a pending ARM is not sent again)."""
+        self.commands.discard("arm")
         self.failure_reason = reason
-        self._set_phase(Phase.FAILED, now, reason, severity=mavlink.MAV_SEVERITY_ERROR)
+        self.set_phase(Phase.FAILED, now, reason, severity=mavlink.MAV_SEVERITY_ERROR)
 
-    def last_statustext(self, since: float | None = None) -> str | None:
-        """The last STATUSTEXT received (after `since`, wall clock), if any."""
-        for when, _, text in reversed(self.statustexts):
-            if since is None or when >= since:
-                return text
-        return None
+    def last_statustext(
+        self, since: float | None = None, max_severity: int = mavlink.MAV_SEVERITY_DEBUG
+    ) -> str | None:
+        """The last STATUSTEXT received (after `since`, wall clock) of severity
+        `max_severity` or worse, if any."""
+        return self.texts.last(since, max_severity)
 
+    def set_phase(
+        self, phase: Phase, now: float, why: str | None = None, severity=mavlink.MAV_SEVERITY_INFO
+    ) -> None:
+        """Enter `phase` (an event says why); landed and failed end any mode goal."""
+        if phase == self.phase:
+            return
+        previous = self.phase
+        self.phase = phase
+        self.phase_since = now
+        if phase in (Phase.LANDED, Phase.FAILED):
+            self._mode_goal = None
+        text = f"{previous.value} -> {phase.value}" + (f" ({why})" if why else "")
+        self.emit("phase", text, now, severity)
+
+    def time_boot_ms(self, now: float) -> int:
+        """`time_boot_ms` of what we send: wall-clock ms since this driver started."""
+        return int(max(now - (self._started or now), 0.0) * 1000) & 0xFFFFFFFF
+
+    # ------------------------------------------------------------------ internals
     def _transmit(self, spec: CommandSpec, now: float) -> None:
         target = (self.spec.system_id, 1)
         p = spec.params
@@ -589,39 +745,6 @@ class Driver(ABC):
             msg = self.link.mav.command_long_encode(*target, spec.command, confirmation, *p)
         self.link.send(msg, now)
 
-    def _retransmit(self, now: float) -> None:
-        for key, pending in list(self._pending.items()):
-            if pending.in_progress or pending.acks > 0:
-                # acknowledged once (IN_PROGRESS, or the first of PX4's two acks): wait, then
-                # treat the silence as the end of the command
-                if now - pending.last_sent >= self.timing.wall(5 * pending.spec.retry_s):
-                    del self._pending[key]
-                    if pending.on_result is not None:
-                        result = mavlink.MAV_RESULT_ACCEPTED if pending.acks else None
-                        pending.on_result(result, now)
-                continue
-            if now - pending.last_sent < self.timing.wall(pending.spec.retry_s, floor=0.05):
-                continue
-            limit = pending.spec.max_attempts
-            if limit is not None and pending.attempts >= limit:
-                del self._pending[key]
-                self.emit(
-                    "command",
-                    f"{pending.spec.name}: no COMMAND_ACK after {pending.attempts} attempts",
-                    now,
-                    mavlink.MAV_SEVERITY_WARNING,
-                )
-                if pending.on_result is not None:
-                    pending.on_result(None, now)
-                continue
-            pending.attempts += 1
-            pending.last_sent = now
-            self._transmit(pending.spec, now)
-
-    def _cancel_pending(self, which: Callable[[CommandSpec], bool]) -> None:
-        for key in [k for k, p in self._pending.items() if which(p.spec)]:
-            del self._pending[key]
-
     def _send_heartbeat(self, now: float) -> None:
         self._last_heartbeat_sent = now
         msg = self.link.mav.heartbeat_encode(
@@ -630,33 +753,45 @@ class Driver(ABC):
         self.link.send(msg, now)
         self.on_heartbeat_sent(now)
 
-    def _set_phase(
-        self, phase: Phase, now: float, why: str | None = None, severity=mavlink.MAV_SEVERITY_INFO
-    ) -> None:
-        if phase == self.phase:
-            return
-        previous = self.phase
-        self.phase = phase
-        self.phase_since = now
-        text = f"{previous.value} -> {phase.value}" + (f" ({why})" if why else "")
-        self.emit("phase", text, now, severity)
-
-    def _request_mode(self, mode: FlightMode, now: float) -> None:
-        self._mode_requested = mode
-        spec = replace(self.mode_command(mode), key="mode")
+    def _send_mode_request(self, mode: FlightMode, now: float) -> None:
+        spec = replace(self.mode_request(mode), key="mode")
         self.send_command(
-            spec, now, lambda result, when, m=mode: self._on_mode_result(m, result, when)
+            spec,
+            now,
+            lambda outcome, when, m=mode: self.on_mode_result(m, outcome, when),
+            confirm=lambda m=mode: self.current_mode() == m,
         )
 
-    def _boot_ms(self, now: float) -> int:
-        """`time_boot_ms` of what we send: wall-clock ms since this driver started."""
-        return int(max(now - (self._started or now), 0.0) * 1000) & 0xFFFFFFFF
+    def _want_mode(self, mode: FlightMode) -> None:
+        """Make `mode` the goal; a new goal starts its back-off afresh."""
+        if mode != self._mode_goal:
+            self.commands.forget_failures("mode")
+        self._mode_goal = mode
+
+    def _pursue_mode_goal(self, now: float) -> None:
+        """Ask again for the mode goal, once its back-off is over and the family allows it."""
+        goal = self._mode_goal
+        if goal is None:
+            return
+        if self.current_mode() == goal:
+            self._mode_goal = None
+            return
+        if self.may_send("mode", now) and self.mode_request_allowed(goal, now):
+            self._send_mode_request(goal, now)
+
+    def _arming_failure_reason(self) -> str | None:
+        """Why arming failed: the last refusal while arming, else the last warning text."""
+        if self.last_refusal is not None and self.last_refusal[0] >= self.phase_since:
+            return self.last_refusal[1]
+        return self.last_statustext(since=self.phase_since, max_severity=REASON_SEVERITY)
 
     @property
     def _takes_off_by_command(self) -> bool:
         return self.takeoff_command(0.0) is not None
 
     # ------------------------------------------------------------------ phase steps
+    # `step` calls `_step_<phase>(now)` of the current phase: a family overrides the ones it
+    # needs (calling the base's where it extends it).
     def _step_connecting(self, now: float) -> None:
         strangers = self.link.seen_system_ids - {self.spec.system_id}
         if strangers and self.telemetry.heartbeat_time is None:
@@ -671,17 +806,23 @@ class Driver(ABC):
             self.fail(f"no heartbeat from system {self.spec.system_id} on {self.link.url}", now)
 
     def _step_initialising(self, now: float) -> None:
-        if self.telemetry.home_enu is None and "home" not in self._pending:
+        if self.telemetry.home_enu is None and self.may_send("home", now):
+            # An autopilot without a home yet acknowledges and sends nothing (ArduPilot before
+            # its EKF origin): wait for the message, then ask again later and later.
+            pacing = self.retry_policy.home_request
             self.send_command(
                 CommandSpec(
                     mavlink.MAV_CMD_REQUEST_MESSAGE,
                     (mavlink.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0),
                     label="request HOME_POSITION",
-                    retry_s=2.0,
-                    max_attempts=None,
                     key="home",
+                    max_attempts=None,
+                    retry=pacing,
+                    backoff=pacing,
+                    confirm_s=pacing.first_s,
                 ),
                 now,
+                confirm=lambda: self.telemetry.home_enu is not None,
             )
         if self.position_ready():
             home = self.telemetry.home_enu
@@ -693,51 +834,47 @@ class Driver(ABC):
                     now,
                 )
                 return
-            self._pending.pop("home", None)
-            self._set_phase(Phase.READY, now)
+            self.commands.discard("home")
+            self.set_phase(Phase.READY, now)
             if self._takeoff_altitude is not None:
                 self._begin_arming(now)
             return
         if now - self.phase_since > self.timing.wall(self.initialise_timeout_s):
             self.fail("no usable position estimate", now)
 
+    def _step_ready(self, now: float) -> None:
+        return None  # `takeoff()` starts arming
+
     def _begin_arming(self, now: float) -> None:
-        self._arm_requested = False
         self._takeoff_sent = False
-        self._first_setpoint_time = None
-        self._set_phase(Phase.ARMING, now)
+        self.set_phase(Phase.ARMING, now)
         self._step_arming(now)
 
     def _step_arming(self, now: float) -> None:
         if now - self.phase_since > self.timing.wall(self.arming_timeout_s):
-            reason = self.last_statustext(since=self.phase_since)
+            reason = self._arming_failure_reason()
             self.fail("could not arm" + (f": {reason}" if reason else ""), now)
             return
         if self.current_mode() != FlightMode.GUIDED:
-            if self.needs_setpoint_stream_before_offboard and (
-                self._first_setpoint_time is None
-                or now - self._first_setpoint_time < self.timing.wall(0.5, floor=0.1)
-            ):
-                return  # the stream must be established first
-            if "mode" not in self._pending:
-                self._request_mode(FlightMode.GUIDED, now)
+            self._want_mode(FlightMode.GUIDED)
+            self._pursue_mode_goal(now)  # paced: only when nothing is pending or backing off
             return
-        if not self.telemetry.armed:
-            if "arm" not in self._pending and not self._arm_requested:
-                self._arm_requested = True
-                self.send_command(
-                    CommandSpec(
-                        mavlink.MAV_CMD_COMPONENT_ARM_DISARM,
-                        (1, 0, 0, 0, 0, 0, 0),
-                        label="arm",
-                        key="arm",
-                    ),
-                    now,
-                    self._on_arm_result,
-                )
+        if self.telemetry.armed:
+            self.set_phase(Phase.TAKING_OFF, now)
+            self._step_taking_off(now)
             return
-        self._set_phase(Phase.TAKING_OFF, now)
-        self._step_taking_off(now)
+        if self.may_send("arm", now) and self.arm_allowed(now):
+            self.send_command(
+                CommandSpec(
+                    mavlink.MAV_CMD_COMPONENT_ARM_DISARM,
+                    (1, 0, 0, 0, 0, 0, 0),
+                    label="arm",
+                    key="arm",
+                ),
+                now,
+                self.on_arm_result,
+                confirm=lambda: self.telemetry.armed,
+            )
 
     def _step_taking_off(self, now: float) -> None:
         target = self._takeoff_altitude
@@ -751,46 +888,45 @@ class Driver(ABC):
                 self.send_command(replace(command, key="takeoff"), now, self._on_takeoff_result)
         altitude = self.telemetry.relative_altitude
         if altitude is not None and altitude >= relative - self.takeoff_altitude_tolerance_m:
-            self._set_phase(Phase.FOLLOWING, now, f"at {altitude:.1f} m")
+            self.set_phase(Phase.FOLLOWING, now, f"at {altitude:.1f} m")
             return
         if now - self.phase_since > self.timing.wall(self.takeoff_timeout_s):
             self.fail(f"take-off did not reach {relative:.1f} m", now)
+
+    def _step_following(self, now: float) -> None:
+        return None  # the runtime streams; the mode goal (after `resume`) is pursued by `step`
+
+    def _step_holding(self, now: float) -> None:
+        return None
 
     def _step_landing(self, now: float) -> None:
         t = self.telemetry
         if t.landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND or (
             not t.armed and t.heartbeat_time is not None and t.heartbeat_time > self.phase_since
         ):
-            self._set_phase(Phase.LANDED, now)
+            self.set_phase(Phase.LANDED, now)
+            self._step_landed(now)  # at once: the runtime may stop stepping a landed fleet
+
+    def _step_landed(self, now: float) -> None:
+        return None
+
+    def _step_failed(self, now: float) -> None:
+        return None
 
     # ------------------------------------------------------------------ command results
-    def _on_mode_result(self, mode: FlightMode, result: int | None, now: float) -> None:
-        if result not in (mavlink.MAV_RESULT_ACCEPTED, None):
-            reason = self.last_statustext(since=now - self.timing.wall(2.0)) or _result_name(result)
-            self.emit(
-                "command", f"mode {mode.value} refused: {reason}", now, mavlink.MAV_SEVERITY_WARNING
-            )
+    def _on_takeoff_result(self, outcome: Outcome, now: float) -> None:
+        if not outcome.accepted and self.phase == Phase.TAKING_OFF:
+            self.fail(f"take-off refused: {outcome.describe()}", now)
 
-    def _on_arm_result(self, result: int | None, now: float) -> None:
-        if result == mavlink.MAV_RESULT_ACCEPTED:
-            return
-        reason = self.last_statustext(since=now - self.timing.wall(2.0)) or _result_name(result)
-        self.emit("command", f"arming refused: {reason}", now, mavlink.MAV_SEVERITY_WARNING)
-        self._arm_requested = False  # try again on a later step, until the arming timeout
-
-    def _on_takeoff_result(self, result: int | None, now: float) -> None:
-        if result != mavlink.MAV_RESULT_ACCEPTED and self.phase == Phase.TAKING_OFF:
-            reason = self.last_statustext(since=now - self.timing.wall(2.0)) or _result_name(result)
-            self.fail(f"take-off refused: {reason}", now)
-
-    def _on_land_result(self, result: int | None, now: float) -> None:
-        if result != mavlink.MAV_RESULT_ACCEPTED:
-            self.emit("command", f"land: {_result_name(result)}", now, mavlink.MAV_SEVERITY_ERROR)
+    def _on_vehicle_text(self, severity: int, text: str, now: float) -> None:
+        self.emit("statustext", text, now, severity)
+        self.commands.on_text(severity, now)
 
     # ------------------------------------------------------------------ message handlers
     def _on_heartbeat(self, msg, now: float) -> None:
         if msg.type == mavlink.MAV_TYPE_GCS or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
             return  # another ground station or a companion, not the autopilot
+        previous = self.current_mode()
         t = self.telemetry
         t.heartbeat_time = now
         t.base_mode = msg.base_mode
@@ -800,8 +936,16 @@ class Driver(ABC):
         t.vehicle_type = msg.type
         t.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         if self.phase == Phase.CONNECTING:
-            self._set_phase(Phase.INITIALISING, now)
+            self.set_phase(Phase.INITIALISING, now)
             self.on_connected(now)
+        current = self.current_mode()
+        if self.mode_since is None or current != previous:
+            self.mode_since = now
+        if current != previous:
+            self.on_mode_changed(previous, now)
+        if self._mode_goal is not None and current == self._mode_goal:
+            self._mode_goal = None
+        self.commands.confirm(now)
 
     def _on_global_position(self, msg, now: float) -> None:
         if msg.lat == 0 and msg.lon == 0:
@@ -839,49 +983,14 @@ class Driver(ABC):
             self.telemetry.prearm_ok = bool(msg.onboard_control_sensors_health & PREARM_CHECK_BIT)
 
     def _on_statustext(self, msg, now: float) -> None:
-        text = msg.text.rstrip("\x00")
-        chunk_id = getattr(msg, "id", 0)
-        if chunk_id:
-            parts = self._chunks.setdefault(chunk_id, [])
-            parts.append(text)
-            if len(msg.text) >= 50:  # a full chunk: more follow
-                return
-            text = "".join(self._chunks.pop(chunk_id))
-        text = text.strip()
-        self.statustexts.append((now, msg.severity, text))
-        self.emit("statustext", text, now, msg.severity)
+        entry = self.texts.add(msg, now)
+        if entry is not None:
+            self._on_vehicle_text(*entry, now)
 
     def _on_command_ack(self, msg, now: float) -> None:
         if msg.target_system not in (0, self.link.mav.srcSystem):
             return
-        pending = self._match_ack(msg)
-        if pending is None:
-            return
-        key, command = pending
-        if msg.result == mavlink.MAV_RESULT_ACCEPTED:
-            command.acks += 1
-        if msg.result == mavlink.MAV_RESULT_IN_PROGRESS:
-            command.in_progress = True
-            command.last_sent = now
-        if self.command_ack_is_final(command, msg):
-            del self._pending[key]
-            if command.on_result is not None:
-                command.on_result(msg.result, now)
-        elif command.acks:
-            command.last_sent = now
-
-    def _match_ack(self, msg) -> tuple[object, PendingCommand] | None:
-        """The pending command an ack answers: same command id; for speed changes the one whose
-        seq the ack echoes in `result_param2`, else the oldest."""
-        candidates = [(k, p) for k, p in self._pending.items() if p.spec.command == msg.command]
-        if not candidates:
-            return None
-        if msg.command == mavlink.MAV_CMD_DO_CHANGE_SPEED:
-            echoed = getattr(msg, "result_param2", 0)
-            for key, pending in candidates:
-                if echoed and int(pending.spec.params[5]) == echoed:
-                    return key, pending
-        return min(candidates, key=lambda kp: kp[1].first_sent)
+        self.commands.on_ack(msg, now)
 
     def _on_command(self, msg, now: float) -> None:
         """A command sent TO the ground station: a leader's speed request (CONTRACTS.md)."""
@@ -905,32 +1014,18 @@ class Driver(ABC):
         self.link.send(ack, now)
 
 
-def _result_name(result: int | None) -> str:
-    if result is None:
-        return "no answer"
-    entry = mavlink.enums["MAV_RESULT"].get(result)
-    return entry.name if entry else str(result)
-
-
-_HANDLERS: dict[str, Callable[[Driver, object, float], None]] = {
-    "HEARTBEAT": Driver._on_heartbeat,
-    "GLOBAL_POSITION_INT": Driver._on_global_position,
-    "HOME_POSITION": Driver._on_home_position,
-    "SIM_STATE": Driver._on_sim_state,
-    "EXTENDED_SYS_STATE": Driver._on_extended_sys_state,
-    "SYS_STATUS": Driver._on_sys_status,
-    "STATUSTEXT": Driver._on_statustext,
-    "COMMAND_ACK": Driver._on_command_ack,
-    "COMMAND_INT": Driver._on_command,
-    "COMMAND_LONG": Driver._on_command,
-}
-
-_PHASE_STEPS: dict[Phase, Callable[[Driver, float], None]] = {
-    Phase.CONNECTING: Driver._step_connecting,
-    Phase.INITIALISING: Driver._step_initialising,
-    Phase.ARMING: Driver._step_arming,
-    Phase.TAKING_OFF: Driver._step_taking_off,
-    Phase.LANDING: Driver._step_landing,
+#: Message type -> the `Driver` method that handles it (others go to `on_family_message`).
+_HANDLERS: dict[str, str] = {
+    "HEARTBEAT": "_on_heartbeat",
+    "GLOBAL_POSITION_INT": "_on_global_position",
+    "HOME_POSITION": "_on_home_position",
+    "SIM_STATE": "_on_sim_state",
+    "EXTENDED_SYS_STATE": "_on_extended_sys_state",
+    "SYS_STATUS": "_on_sys_status",
+    "STATUSTEXT": "_on_statustext",
+    "COMMAND_ACK": "_on_command_ack",
+    "COMMAND_INT": "_on_command",
+    "COMMAND_LONG": "_on_command",
 }
 
 

@@ -8,18 +8,23 @@
   OFFBOARD it means "offboard signal present"). While disarmed PX4 accepts OFFBOARD without a
   stream and refuses at arming (`Arming denied: Resolve system health failures first`), so the
   driver never relies on the mode ack alone.
-* Every MAV_CMD_DO_SET_MODE is answered twice: the first ACCEPTED, the second the verdict.
+* Every MAV_CMD_DO_SET_MODE is answered twice: the first ACCEPTED, the second the verdict; the
+  mode shows in the next heartbeat (about 1 Hz), so a mode request is confirmed only then
+  (`retry_policy.confirm_s`) and never repeated meanwhile.
 * The stream must stay above 2 Hz: after COM_OF_LOSS_T (1 s) without a setpoint PX4 falls back
   to position control (POSCTL, system status CRITICAL); the driver reports it as a `failsafe`
-  event and goes to HOLDING. Back in FOLLOWING (the runtime's `resume`), it selects OFFBOARD
-  again as soon as the stream flows (PX4 refuses OFFBOARD while armed without a stream:
-  `Switching to Offboard is currently not available`).
+  event and goes to HOLDING. Back in FOLLOWING (the runtime's `resume`), it asks for OFFBOARD
+  at once, and after a refusal (PX4 refuses OFFBOARD while armed without a stream: `Switching
+  to Offboard is currently not available`) again once the back-off is over and the stream
+  flows.
 * Take-off is by the stream (OFFBOARD climbs to the setpoint altitude), landing with
   MAV_CMD_NAV_LAND (AUTO.LAND); PX4 stays armed after `Landing detected` until it is
   disarmed, so the driver disarms once landed.
 * PX4's home carries a metre or two of GPS noise: the home check tolerates 3 m.
 * PX4's EVENT messages (id 410) are not in pymavlink's dialect: the link counts them as bad data
-  and the STATUSTEXT that accompanies each one carries the text.
+  and the STATUSTEXT that accompanies each one carries the text, just after the refusing ACK
+  (in chunks of 50 characters sharing an id), or up to 1.5 s later while PX4's logger is not
+  running yet (P2 1.42): then the refusal is reported with its MAV_RESULT.
 """
 
 from __future__ import annotations
@@ -27,10 +32,8 @@ from __future__ import annotations
 import math
 from typing import ClassVar
 
-import numpy as np
-
 from gcs.drivers.autopilot import AutopilotDriver
-from gcs.drivers.base import CommandSpec, FlightMode, Phase, mavlink
+from gcs.drivers.base import CommandSpec, FlightMode, Phase, RetryPolicy, mavlink
 
 
 def px4_custom_mode(main: int, sub: int = 0) -> int:
@@ -65,12 +68,11 @@ class PX4Driver(AutopilotDriver):
     initialise_timeout_s = 60.0
     arming_timeout_s = 20.0
     takeoff_timeout_s = 90.0
+    #: The heartbeat comes every 1.018 s (P1) and shows a new mode at the next one; the
+    #: refusal texts follow the refusing ACK within the same millisecond (P1 7.76, P2 29.92).
+    retry_policy = RetryPolicy(confirm_s=2.5, reason_before_s=0.1, reason_after_s=0.3)
     #: Without the pre-arm bit, ARM anyway after this long in OFFBOARD to learn why not.
     arm_without_prearm_after_s: ClassVar[float] = 5.0
-    #: The stream counts as flowing after this long (vehicle time) of setpoints.
-    stream_established_s: ClassVar[float] = 0.5
-    #: A gap longer than this (vehicle time) starts a new streak (half of COM_OF_LOSS_T).
-    stream_gap_s: ClassVar[float] = 0.5
 
     stream_rates_hz: ClassVar[dict[int, float]] = {
         mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
@@ -79,10 +81,6 @@ class PX4Driver(AutopilotDriver):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.prearm: bool | None = None  # SYS_STATUS health pre-arm bit (PX4: health only)
-        self._guided_since: float | None = None
-        self._stream_since: float | None = None  # start of the current setpoint streak
-        self._last_setpoint: float | None = None
-        self._disarm_sent = False
 
     # ------------------------------------------------------------------ family hooks
     def mode_command(self, mode: FlightMode) -> CommandSpec:
@@ -112,10 +110,11 @@ class PX4Driver(AutopilotDriver):
         return super().position_ready() and bool(armable)
 
     def arm_allowed(self, now: float) -> bool:
-        if self._guided_since is None:
-            self._guided_since = now
-        waited = now - self._guided_since > self.timing.wall(self.arm_without_prearm_after_s)
-        return bool(self.prearm) or waited
+        if self.prearm:
+            return True
+        # In OFFBOARD (shown) since the later of arming's start and the mode change.
+        since = max(self.phase_since, self.mode_since or self.phase_since)
+        return now - since > self.timing.wall(self.arm_without_prearm_after_s)
 
     def vehicle_mode_phase(self) -> Phase:
         if self.telemetry.custom_mode in (AUTO_LAND, AUTO_RTL):
@@ -138,7 +137,7 @@ class PX4Driver(AutopilotDriver):
     def home_tolerance_m(self) -> float:
         return 3.0  # PX4's home carries a metre or two of GPS noise
 
-    # ------------------------------------------------------------------ Driver overrides
+    # ------------------------------------------------------------------ Driver hooks
     def on_message(self, msg, now: float) -> None:
         if msg.get_type() == "SYS_STATUS":
             self.prearm = bool(
@@ -146,56 +145,16 @@ class PX4Driver(AutopilotDriver):
             )
         super().on_message(msg, now)
 
-    def send_setpoint(
-        self,
-        position_enu: np.ndarray,
-        velocity_enu: np.ndarray,
-        acceleration_enu: np.ndarray | None,
-        mission_time: float,
-        now: float,
-        geodetic: np.ndarray | None = None,
-    ) -> None:
-        if self._last_setpoint is None or now - self._last_setpoint > self.timing.wall(
-            self.stream_gap_s, floor=0.3
-        ):
-            self._stream_since = now  # a new streak
-        self._last_setpoint = now
-        super().send_setpoint(
-            position_enu, velocity_enu, acceleration_enu, mission_time, now, geodetic
-        )
-
-    def step(self, now: float) -> None:
-        if self.phase != Phase.ARMING or self.current_mode() != FlightMode.GUIDED:
-            self._guided_since = None
-        super().step(now)
-        if self.phase == Phase.FOLLOWING:
-            self._reenter_offboard(now)
-        elif self.phase == Phase.LANDED and self.telemetry.armed and not self._disarm_sent:
-            self._disarm_sent = True
+    def _step_landed(self, now: float) -> None:
+        """PX4 stays armed after `Landing detected`: disarm (again after a refusal, paced)."""
+        if self.telemetry.armed and self.may_send("disarm", now):
             self.send_command(
                 CommandSpec(
-                    mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (0, 0, 0, 0, 0, 0, 0), label="disarm"
+                    mavlink.MAV_CMD_COMPONENT_ARM_DISARM,
+                    (0, 0, 0, 0, 0, 0, 0),
+                    label="disarm",
+                    key="disarm",
                 ),
                 now,
+                confirm=lambda: not self.telemetry.armed,
             )
-
-    # ------------------------------------------------------------------ helpers
-    def stream_flowing(self, now: float) -> bool:
-        """Setpoints have been flowing without a gap for `stream_established_s`."""
-        if self._stream_since is None or self._last_setpoint is None:
-            return False
-        recent = now - self._last_setpoint <= self.timing.wall(0.3, floor=0.3)
-        return recent and now - self._stream_since >= self.timing.wall(
-            self.stream_established_s, floor=0.1
-        )
-
-    def _reenter_offboard(self, now: float) -> None:
-        """Back to OFFBOARD after a failsafe, once the stream flows again (paced)."""
-        if self.current_mode() == FlightMode.GUIDED or "mode" in self._pending:
-            return
-        if now < max(self._backoff_until, self._mode_confirm_until):
-            return
-        if not self.stream_flowing(now):
-            return
-        self._request_mode(FlightMode.GUIDED, now)
-        self._back_off(now)

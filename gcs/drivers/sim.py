@@ -66,7 +66,7 @@ class SimDriver(Driver):
         if mission_time is None:
             return
         msg = self.link.mav.named_value_int_encode(
-            self._boot_ms(now), MISSION_TIME_NAME, int(round(mission_time * 1000))
+            self.time_boot_ms(now), MISSION_TIME_NAME, int(round(mission_time * 1000))
         )
         self.link.send(msg, now)
 

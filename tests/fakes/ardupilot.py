@@ -127,10 +127,16 @@ class ArduCopterModel:
         params: ArduCopterParams = ArduCopterParams(),
         known_modes: frozenset[int] = KNOWN_MODES,
         extra_arm_refusals: int = 0,
+        refusal_text_delay_s: float = 0.0,
+        info_text_with_refusals: str | None = None,
     ) -> None:
         """`known_modes`: the modes this firmware was built with (others: `No such mode`).
         `extra_arm_refusals`: the next N arming attempts in GUIDED fail as in A1 at 28.66
-        (`Arm: Need Position Estimate`) even with a position, to exercise a driver's retry."""
+        (`Arm: Need Position Estimate`) even with a position, to exercise a driver's retry.
+        `refusal_text_delay_s`: the `Arm: ...` / `No such mode N` text of a refusing ACK goes
+        out this long (wall seconds) after the ACK; 0: just before it, as recorded (1 ms).
+        `info_text_with_refusals`: an INFO text sent with every refusing ACK, just before it
+        (as `EKF3 IMU0 is using GPS` (A1 41.52) can be near an ARM): never the reason."""
         self.system_id = system_id
         self.boot_home = home
         self.home = home
@@ -139,6 +145,8 @@ class ArduCopterModel:
         self.params = params
         self.known_modes = known_modes
         self.extra_arm_refusals = extra_arm_refusals
+        self.refusal_text_delay_s = refusal_text_delay_s
+        self.info_text_with_refusals = info_text_with_refusals
         self.outbox = Outbox()
         self.mode = STABILIZE
         self.armed = False
@@ -224,7 +232,7 @@ class ArduCopterModel:
                 self.outbox.send(now, self._ack(msg, ACCEPTED, now))
                 self._set_mode(mode, now)
             else:
-                self.outbox.send(now, self._ack(msg, FAILED, now), text(4, f"No such mode {mode}"))
+                self._refuse(msg, text(4, f"No such mode {mode}"), now, text_first=False)
         elif cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
             ok = self.armed and self.mode == GUIDED and not self.flying() and msg.param7 > 0
             if ok:
@@ -265,6 +273,20 @@ class ArduCopterModel:
         message = self._stream_message(message_id, now)
         return None if message is None else [message]
 
+    def _refuse(self, msg, reason, now: float, *, text_first: bool) -> None:
+        """ACK FAILED with its reason in the same millisecond, the text first (A1 0.942: `Arm:`
+        1 ms before the ACK) or not (A2 10.005: `No such mode`), or `refusal_text_delay_s`
+        after the ACK."""
+        ack = self._ack(msg, FAILED, now)
+        info = [text(6, self.info_text_with_refusals)] if self.info_text_with_refusals else []
+        if self.refusal_text_delay_s > 0:
+            self.outbox.send(now, *info, ack)
+            self.outbox.send(now + self.refusal_text_delay_s, reason)
+        elif text_first:
+            self.outbox.send(now, reason, *info, ack)
+        else:
+            self.outbox.send(now, *info, ack, reason)
+
     def _arm_refusal(self, now: float) -> str | None:
         if self.booting:
             return "Arm: System not initialised"
@@ -285,7 +307,7 @@ class ArduCopterModel:
             return
         refusal = self._arm_refusal(now)
         if refusal is not None:
-            self.outbox.send(now, text(2, refusal), self._ack(msg, FAILED, now))
+            self._refuse(msg, text(2, refusal), now, text_first=True)
             return
         self.armed = True
         self._armed_at = now

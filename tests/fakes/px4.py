@@ -166,9 +166,11 @@ class Px4Model:
         timeline: Px4Timeline = Px4Timeline(),
         params: Px4Params = Px4Params(),
         initial_mode: int = AUTO_LOITER,
+        ignored_modes: frozenset[int] = frozenset(),
     ) -> None:
         """`initial_mode`: the mode it is in when the GCS connects (AUTO.LOITER after boot;
-        OFFBOARD after a flight that ended like P1)."""
+        OFFBOARD after a flight that ended like P1). `ignored_modes`: custom modes it answers
+        with two ACCEPTED and does not enter, as P2 4.58 shows for an unknown main mode."""
         self.system_id = system_id
         self.boot_spot = home
         self.speedup = speedup
@@ -180,6 +182,7 @@ class Px4Model:
         self.home: Home | None = None
         self.mode = initial_mode
         self.intended_mode = initial_mode
+        self.ignored_modes = ignored_modes
         self.mode_after_disarm = initial_mode
         self.armed = False
         self.failsafe = False
@@ -386,6 +389,8 @@ class Px4Model:
             mode = OFFBOARD
         else:
             mode = px4_mode(main)
+        if mode in self.ignored_modes:
+            return ACCEPTED  # like P2 4.58: two ACCEPTED, nothing changes
         self.failsafe = False
         if mode == AUTO_LAND:
             self.mode_after_disarm = self.intended_mode

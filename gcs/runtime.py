@@ -72,6 +72,8 @@ _SEVERITY_LEVEL = {
 
 #: Mission seconds a position sample may be carried forward by its velocity (distances).
 MAX_EXTRAPOLATION_S = 1.0
+#: After the last landing, how long (wall s) drivers may still finish commands in flight.
+SETTLE_WALL_S = 3.0
 
 
 class MissionClock:
@@ -309,6 +311,7 @@ class MissionRun:
         self._last_metrics: float | None = None
         self._last_view = -math.inf
         self._abort_time: float | None = None
+        self._settle_deadline: float | None = None
         self.ticks = 0
         self.current_speed = plan.speeds.initial
         self.tracking_now = np.full(size, np.nan)
@@ -942,7 +945,7 @@ class MissionRun:
             for i, d in enumerate(self.drivers)
         ]
         if all(done):
-            return True
+            return self._settled(now)
         if self.aborting and self._abort_time is not None:
             t = self.clock.mission_time(now)
             if t - self._abort_time > self.options.finish_timeout_s:
@@ -952,6 +955,16 @@ class MissionRun:
                 )
                 return True
         return False
+
+    def _settled(self, now: float) -> bool:
+        """Every UAV is down: keep stepping the landed ones' drivers while they still have
+        commands in flight (PX4 must be disarmed after landing, and a refused DISARM is
+        retried), for at most `SETTLE_WALL_S` of wall time."""
+        if not any(d.phase is Phase.LANDED and d.pending_commands for d in self.drivers):
+            return True
+        if self._settle_deadline is None:
+            self._settle_deadline = now + SETTLE_WALL_S
+        return now >= self._settle_deadline
 
     # ------------------------------------------------------------------ result
     def _result(self) -> RunResult:

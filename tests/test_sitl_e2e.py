@@ -36,7 +36,7 @@ MISSION = {
     "fleet": {"size": "auto"},
     "vehicle": {"max_speed": 12, "max_acceleration": 6, "radius": 0.5},
 }
-SPEEDUP = {"ardupilot": 20.0, "px4": 10.0}  # PX4's offboard-loss timeout stays 1 s wall
+SPEEDUP = {"ardupilot": 10.0, "px4": 10.0}  # PX4's offboard-loss timeout stays 1 s wall
 
 
 @pytest.fixture

@@ -72,7 +72,7 @@ _SEVERITY_LEVEL = {
 
 #: Mission seconds a position sample may be carried forward by its velocity (distances).
 MAX_EXTRAPOLATION_S = 1.0
-#: After the last landing, how long (wall s) drivers may still finish commands in flight.
+#: After the last landing, how long (wall s) the GCS waits for disarming and commands in flight.
 SETTLE_WALL_S = 3.0
 
 
@@ -957,10 +957,13 @@ class MissionRun:
         return False
 
     def _settled(self, now: float) -> bool:
-        """Every UAV is down: keep stepping the landed ones' drivers while they still have
-        commands in flight (PX4 must be disarmed after landing, and a refused DISARM is
-        retried), for at most `SETTLE_WALL_S` of wall time."""
-        if not any(d.phase is Phase.LANDED and d.pending_commands for d in self.drivers):
+        """Every UAV is down: keep stepping the landed ones while they are still armed or have
+        commands in flight (ArduPilot disarms itself ~0.5 s after touchdown; PX4 must be
+        disarmed, and a refused DISARM is retried), for at most `SETTLE_WALL_S` of wall time."""
+        if not any(
+            d.phase is Phase.LANDED and (d.pending_commands or d.telemetry.armed)
+            for d in self.drivers
+        ):
             return True
         if self._settle_deadline is None:
             self._settle_deadline = now + SETTLE_WALL_S

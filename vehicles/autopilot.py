@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -44,6 +45,7 @@ AUTOPILOT_COMPONENT = 1  # MAV_COMP_ID_AUTOPILOT1
 FORCE_ARM_MAGIC = 2989
 FORCE_DISARM_MAGIC = 21196
 MISSION_TIME_NAME = "MSN_TIME"
+MAX_EXTRAPOLATION_S = 1.0  # a setpoint's feed-forward is extrapolated for at most this long
 
 
 class Mode(IntEnum):
@@ -462,8 +464,10 @@ class Autopilot:
             self._update_leader(stamp)
 
     def clock_slipped(self, seconds: float, stamp: Stamp) -> None:
-        """The simulation could not keep up and its clock slipped (reported, rate-limited)."""
-        self._refuse("slip", f"Sim: clock slipped {seconds:.2f} s (CPU overload)", stamp)
+        """The simulation could not keep up and its clock slipped (the sim rate-limits this)."""
+        self.status_text(
+            mavlink.MAV_SEVERITY_WARNING, f"Sim: clock slipped {seconds:.2f} s (CPU overload)"
+        )
 
     def _update_ground_state(self, stamp: Stamp) -> None:
         i = self.index
@@ -554,6 +558,12 @@ class Autopilot:
             if self.landed:
                 self.gcs_failsafe = "land"
                 self.disarm(stamp, "GCS Failsafe: disarming")
+                return
+            if self.mode in (Mode.LAND, Mode.RTL):  # already on its way down: carry on
+                self.gcs_failsafe = "land"
+                self.status_text(
+                    mavlink.MAV_SEVERITY_CRITICAL, "GCS Failsafe: no heartbeat, landing"
+                )
                 return
             self.gcs_failsafe = "hold"
             self.set_mode(Mode.BRAKE, stamp)
@@ -1105,7 +1115,7 @@ class Autopilot:
 
     def _setpoint_refused(self, reason: str, stamp: Stamp) -> None:
         if self.mode == Mode.GUIDED:  # outside GUIDED setpoints are ignored silently
-            self._refuse("setpoint", reason, stamp)
+            self._refuse(re.sub(r"\d+", "#", reason), reason, stamp)  # one limiter per kind
 
     def _apply_setpoint(
         self,
@@ -1133,7 +1143,7 @@ class Autopilot:
         if self.landed and self.guided != Guided.TAKEOFF:
             return  # like ArduCopter: a landed vehicle needs MAV_CMD_NAV_TAKEOFF first
         i = self.index
-        horizon = self.config.failsafe.setpoint_timeout_s
+        horizon = min(self.config.failsafe.setpoint_timeout_s, MAX_EXTRAPOLATION_S)
         self._set_limits()
         self.dynamics.set_reference(
             i, position, velocity, acceleration, horizon_s=horizon, time_s=stamp.sim_s

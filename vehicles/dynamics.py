@@ -59,6 +59,7 @@ class Controller:
     velocity_gain: float = 2.5  # 1/s, PSC_VELXY_P
     velocity_integral_gain: float = 1.0  # 1/s^2, PSC_VELXY_I
     integral_limit_mps2: float = 2.0  # bound of the integral term
+    integral_band_mps: float = 0.5  # the integral only acts on velocity errors below this
     shaping_acceleration_mps2: float = 3.0  # deceleration the square-root controller plans with
 
 
@@ -95,14 +96,6 @@ class DynamicsConfig:
     airframe: Airframe = field(default_factory=Airframe)
     controller: Controller = field(default_factory=Controller)
     disturbances: Disturbances = field(default_factory=Disturbances)
-
-
-def sqrt_controller(error: np.ndarray, gain: float, deceleration: float) -> np.ndarray:
-    """ArduPilot's square-root controller on magnitudes: linear near 0, sqrt(2 a d) beyond."""
-    magnitude = np.abs(error)
-    linear_distance = deceleration / (gain * gain)
-    far = np.sqrt(2.0 * deceleration * np.maximum(magnitude - 0.5 * linear_distance, 0.0))
-    return np.where(magnitude > linear_distance, np.sign(error) * far, error * gain)
 
 
 class FleetDynamics:
@@ -147,6 +140,7 @@ class FleetDynamics:
         self.thrust_acceleration = self._thrust.T
         self.wind = self._wind.T
         self.navigation_error = self._navigation.T
+        self.integral = self._integral.T  # velocity-loop integral
         self.reference_position = self._reference_position.T
         self.reference_velocity = self._reference_velocity.T
         self.reference_acceleration = self._reference_acceleration.T
@@ -182,10 +176,6 @@ class FleetDynamics:
         self._slow_pending = 0
 
     # -- estimated state (what the autopilot knows and reports) ----------------------------
-    def estimated_position(self) -> np.ndarray:
-        """True position plus navigation error, (N, 3)."""
-        return self.position + self.navigation_error
-
     def estimated(self, index: int) -> np.ndarray:
         """Estimated position of vehicle ``index``, (3,) (a new array)."""
         return self._position[:, index] + self._navigation[:, index]
@@ -281,6 +271,7 @@ class FleetDynamics:
         decel_v = min(ctl.shaping_acceleration_mps2, af.max_vertical_acceleration_mps2)
         linear_h, linear_v = decel_h / (kp * kp), decel_v / (kp * kp)
         integral_limit = ctl.integral_limit_mps2 / ki if ki > 0 else 0.0
+        integral_band = ctl.integral_band_mps
         tc = af.thrust_time_constant_s
         thrust_alpha = 1.0 - np.exp(-dt / tc) if tc > 0 else 1.0
         gust_phi = np.exp(-dt / dist.gust_time_constant_s)
@@ -336,17 +327,25 @@ class FleetDynamics:
             # position loop: square-root controller (horizontal on the norm) + velocity feed-forward
             error -= position
             error -= nav
+            # (linear near the target: gain kp; beyond, sqrt(2 a d) -- only computed when needed)
             err_h = np.hypot(error[0], error[1])
-            gain_h = np.sqrt(np.maximum(err_h - 0.5 * linear_h, 0.0) * (2.0 * decel_h))
-            gain_h /= np.maximum(err_h, 1e-9)
-            gain_h = np.where(err_h > linear_h, gain_h, kp)
+            far = err_h > linear_h
+            if far.any():
+                gain_h = np.sqrt(np.maximum(err_h - 0.5 * linear_h, 0.0) * (2.0 * decel_h))
+                gain_h /= np.maximum(err_h, 1e-9)
+                gain_h = np.where(far, gain_h, kp)
+                error[0] *= gain_h
+                error[1] *= gain_h
+            else:
+                error[:2] *= kp
             err_v = np.abs(error[2])
-            gain_v = np.sqrt(np.maximum(err_v - 0.5 * linear_v, 0.0) * (2.0 * decel_v))
-            gain_v /= np.maximum(err_v, 1e-9)
-            gain_v = np.where(err_v > linear_v, gain_v, kp)
-            error[0] *= gain_h
-            error[1] *= gain_h
-            error[2] *= gain_v
+            far = err_v > linear_v
+            if far.any():
+                gain_v = np.sqrt(np.maximum(err_v - 0.5 * linear_v, 0.0) * (2.0 * decel_v))
+                gain_v /= np.maximum(err_v, 1e-9)
+                error[2] *= np.where(far, gain_v, kp)
+            else:
+                error[2] *= kp
             error *= use_pos
             vel_ref *= use_vel
             vel_cmd = error
@@ -371,6 +370,7 @@ class FleetDynamics:
             free = closed_dt * ~self.grounded
             vel_error[:2] *= free * (scale >= 1.0)
             vel_error[2] *= free * (vertical == acc_cmd[2])
+            vel_error *= np.abs(vel_error) < integral_band * dt  # only near steady state
             acc_cmd[2] = vertical
             integral += vel_error
             np.minimum(

@@ -9,9 +9,11 @@ simulated world has no geoid).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pymap3d
+from pymap3d.ecef import geodetic2ecef, uvw2enu
 
 
 @dataclass(frozen=True)
@@ -30,29 +32,23 @@ class GeodeticOrigin:
         )
         return np.asarray(lat), np.asarray(lon), np.asarray(alt)
 
+    @cached_property
+    def _ecef(self) -> tuple[float, float, float]:
+        x, y, z = geodetic2ecef(self.latitude_deg, self.longitude_deg, self.altitude_m)
+        return float(x), float(y), float(z)
+
     def to_local(self, latitude_deg: float, longitude_deg: float, altitude_m: float) -> np.ndarray:
-        """One geodetic point -> local ENU (3,)."""
-        east, north, up = pymap3d.geodetic2enu(
-            latitude_deg,
-            longitude_deg,
-            altitude_m,
-            self.latitude_deg,
-            self.longitude_deg,
-            self.altitude_m,
-        )
+        """One geodetic point -> local ENU (3,): pymap3d's geodetic2enu with the origin's ECEF cached."""
+        x, y, z = geodetic2ecef(latitude_deg, longitude_deg, altitude_m)
+        x0, y0, z0 = self._ecef
+        east, north, up = uvw2enu(x - x0, y - y0, z - z0, self.latitude_deg, self.longitude_deg)
         return np.array([float(east), float(north), float(up)])
 
 
-def ned_to_enu(vector: np.ndarray) -> np.ndarray:
-    """(north, east, down) -> (east, north, up), on the last axis."""
-    vector = np.asarray(vector, dtype=float)
-    return np.stack([vector[..., 1], vector[..., 0], -vector[..., 2]], axis=-1)
-
-
-def enu_to_ned(vector: np.ndarray) -> np.ndarray:
-    """(east, north, up) -> (north, east, down), on the last axis."""
-    vector = np.asarray(vector, dtype=float)
-    return np.stack([vector[..., 1], vector[..., 0], -vector[..., 2]], axis=-1)
+def ned_to_enu(vector: np.ndarray | tuple[float, float, float]) -> np.ndarray:
+    """One (north, east, down) vector -> (east, north, up)."""
+    north, east, down = vector
+    return np.array([east, north, -down], dtype=float)
 
 
 def rotate_body_to_ned(vector_frd: np.ndarray, yaw_rad: float) -> np.ndarray:

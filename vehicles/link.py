@@ -2,7 +2,8 @@
 
 The vehicle listens on its own UDP port (``udpin``) and sends to the last peer that sent it a
 valid MAVLink message (CONTRACTS.md: "replying to the last sender"), plus, when given, a fixed
-``out`` address (``udpout``, e.g. QGroundControl on 14550). Every datagram is parsed on its own
+``out`` address (``udpout``, e.g. QGroundControl on 14550). The messages of one control tick go
+out together, several MAVLink frames per datagram. Every received datagram is parsed on its own
 (a truncated datagram never corrupts the next one); anything that is not valid MAVLink is
 counted and dropped.
 
@@ -30,6 +31,8 @@ Address = tuple[str, int]
 MAX_DATAGRAM = 65535
 RECEIVE_BUFFER_BYTES = 1 << 20
 MAX_DATAGRAMS_PER_POLL = 256
+MAX_BATCH_BYTES = 1400  # frames per datagram: stay below a typical path MTU
+SIGNING_EPOCH = 1420070400  # MAVLink 2 signing timestamps count from 2015-01-01
 # kernel arrival timestamps: a setpoint is stamped when it arrived, not when a busy process
 # got round to reading it (at a 20x speedup, 10 ms late would be 2 m at 10 m/s)
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35 if sys.platform == "linux" else None)
@@ -48,10 +51,13 @@ def make_codec(sysid: int, signing_key: bytes | None = None) -> mavlink.MAVLink:
     """A MAVLink 2 codec for system ``sysid``, component 1 (autopilot); signed if a key is given."""
     codec = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=AUTOPILOT_COMPONENT)
     codec.robust_parsing = True
-    if signing_key is not None:
+    if signing_key is not None:  # as mavutil's setup_signing: unsigned input is then refused
         codec.signing.secret_key = signing_key
         codec.signing.sign_outgoing = True
         codec.signing.link_id = 0
+        codec.signing.timestamp = int(
+            max(time.time() - SIGNING_EPOCH, 0.0) * 100_000
+        )  # 10 us units
     return codec
 
 
@@ -83,6 +89,7 @@ class VehicleLink:
         self.stats = LinkStats()
         self.codec = make_codec(sysid, signing_key)
         self.codec.file = self  # pymavlink's send() writes the packed frame here
+        self._pending: list[bytes] = []
         self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
@@ -101,15 +108,9 @@ class VehicleLink:
     def close(self) -> None:
         self.socket.close()
 
-    # pymavlink's MAVLink.send() calls write() with the packed frame
+    # pymavlink's MAVLink.send() calls write() with each packed frame: collect them
     def write(self, frame: bytes) -> None:
-        for address in self._destinations():
-            try:
-                self.socket.sendto(frame, address)
-                self.stats.sent += 1
-            except OSError as exc:  # unreachable peer, full buffer: UDP drops it
-                self.stats.send_errors += 1
-                log.debug("sysid %d: send to %s failed: %s", self.sysid, address, exc)
+        self._pending.append(frame)
 
     def _destinations(self) -> list[Address]:
         if self.peer is None:
@@ -118,8 +119,30 @@ class VehicleLink:
             return [self.peer]
         return [self.peer, self.out]
 
-    def send(self, message: mavlink.MAVLink_message) -> None:
-        self.codec.send(message)
+    def send(self, messages: list[mavlink.MAVLink_message]) -> None:
+        """Encode ``messages`` and send them, several frames per datagram (up to
+        ``MAX_BATCH_BYTES``, as MAVLink over UDP allows): one system call, not one per message."""
+        for message in messages:
+            self.codec.send(message)
+        destinations = self._destinations()
+        batch = bytearray()
+        for frame in self._pending:
+            if batch and len(batch) + len(frame) > MAX_BATCH_BYTES:
+                self._sendto(bytes(batch), destinations)
+                batch.clear()
+            batch += frame
+        if batch:
+            self._sendto(bytes(batch), destinations)
+        self._pending.clear()
+
+    def _sendto(self, datagram: bytes, destinations: list[Address]) -> None:
+        for address in destinations:
+            try:
+                self.socket.sendto(datagram, address)
+                self.stats.sent += 1
+            except OSError as exc:  # unreachable peer, full buffer: UDP drops it
+                self.stats.send_errors += 1
+                log.debug("sysid %d: send to %s failed: %s", self.sysid, address, exc)
 
     def _reset_parser(self) -> None:
         """Forget any partial frame: each UDP datagram is parsed on its own."""

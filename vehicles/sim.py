@@ -3,8 +3,11 @@
 The simulated clock runs ``speedup`` times faster than the wall clock. The dynamics of every
 vehicle of the process advance together (vectorised) in fixed steps; the autopilots run at the
 control rate; at each wake-up the loop integrates as many steps as the wall clock asks for, so a
-high speedup costs no more wake-ups than real time. If the process falls more than
-``max_lag_s`` (wall clock) behind, the simulated clock slips instead of racing to catch up.
+high speedup costs no more wake-ups than real time. Every datagram keeps its kernel arrival
+time and each message reaches its autopilot when the simulated clock reaches that time,
+interleaved with the steps: a process briefly starved of CPU replays its input in order instead
+of flying on stale setpoints. If the process falls more than ``max_lag_s`` (wall clock) behind,
+the simulated clock slips instead of racing to catch up, and every vehicle reports it.
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ log = logging.getLogger(__name__)
 
 DEFAULT_ORIGIN = GeodeticOrigin(45.7640, 4.8357, 170.0)
 _EPOLL_RESOLUTION_S = 0.001
+_MAX_TICKS_PER_WAKE = 10
+_SLIP_REPORT_INTERVAL_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -55,7 +60,7 @@ class SimConfig:
     leader_requests: tuple[LeaderRequest, ...] = ()
     control_rate_hz: float = 50.0
     max_lag_s: float = 1.0
-    signing_key: bytes | None = None
+    signing_key: bytes | None = None  # MAVLink 2 signing for every vehicle (see link.make_codec)
 
 
 @dataclass(frozen=True)
@@ -111,6 +116,8 @@ class Simulation:
         self._steps_per_tick = max(1, round(1.0 / (config.control_rate_hz * step_s)))
         self._steps = 0
         self._wall0 = 0.0
+        self._slip_unreported = 0.0
+        self._slip_reported_wall = float("-inf")
 
     def close(self) -> None:
         for link in self.links:
@@ -131,6 +138,7 @@ class Simulation:
         step_s = cfg.dynamics.step_s
         tick_s = self._steps_per_tick * step_s
         max_lag_steps = max(self._steps_per_tick, int(cfg.max_lag_s * cfg.speedup / step_s))
+        max_steps_per_wake = _MAX_TICKS_PER_WAKE * self._steps_per_tick  # stay responsive
         start = time.monotonic()
         self._wall0 = start - self.sim_time() / cfg.speedup
         while not should_stop():
@@ -140,7 +148,7 @@ class Simulation:
             if due - self._steps > max_lag_steps:
                 self._slip(due - self._steps - max_lag_steps, now)
                 due = self._steps + max_lag_steps
-            self._advance(due, self._receive())
+            self._advance(min(due, self._steps + max_steps_per_wake), self._receive())
             next_tick = (self._steps // self._steps_per_tick + 1) * tick_s
             wait = self._wall0 + next_tick / cfg.speedup - time.monotonic()
             if wait > _EPOLL_RESOLUTION_S:  # epoll rounds up to whole milliseconds
@@ -152,15 +160,21 @@ class Simulation:
         return self.stats
 
     def _slip(self, steps: int, now: float) -> None:
-        """Give up catching up ``steps`` steps: the simulated clock slips (and says so)."""
+        """Give up catching up ``steps`` steps: the simulated clock slips (and says so, at most
+        every few seconds of wall clock, with the total since the last report)."""
         cfg = self.config
         seconds = steps * cfg.dynamics.step_s
         self._wall0 += seconds / cfg.speedup
         self.stats.slipped_sim_s += seconds
-        log.warning("simulation %.2f s behind: the simulated clock slips", seconds)
+        self._slip_unreported += seconds
+        if now - self._slip_reported_wall < _SLIP_REPORT_INTERVAL_S:
+            return
+        log.warning("simulation %.2f s behind: the simulated clock slips", self._slip_unreported)
         stamp = Stamp(self.sim_time(), now)
         for autopilot in self.autopilots:
-            autopilot.clock_slipped(seconds, stamp)
+            autopilot.clock_slipped(self._slip_unreported, stamp)
+        self._slip_reported_wall = now
+        self._slip_unreported = 0.0
 
     def _advance(self, due_steps: int, arrivals: list[_Arrival]) -> None:
         """Integrate up to ``due_steps``, running the autopilots at every control tick and
@@ -233,6 +247,5 @@ class Simulation:
     @staticmethod
     def _flush(autopilot: Autopilot, link: VehicleLink) -> None:
         if autopilot.outbox:
-            for message in autopilot.outbox:
-                link.send(message)
+            link.send(autopilot.outbox)
             autopilot.outbox.clear()

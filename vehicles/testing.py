@@ -64,10 +64,16 @@ def free_udp_ports(count: int, host: str = "127.0.0.1", attempts: int = 50) -> i
 class VehicleProcess:
     """``python -m vehicles sim --count N --base-port P ...`` as a subprocess (context manager)."""
 
-    def __init__(self, count: int = 1, speedup: float = 1.0, args: Sequence[str] = ()) -> None:
+    def __init__(
+        self,
+        count: int = 1,
+        speedup: float = 1.0,
+        args: Sequence[str] = (),
+        base_port: int | None = None,
+    ) -> None:
         self.count = count
         self.speedup = speedup
-        self.base_port = free_udp_ports(count)
+        self.base_port = free_udp_ports(count) if base_port is None else base_port
         self.command = [
             sys.executable,
             "-m",
@@ -97,7 +103,7 @@ class VehicleProcess:
         return self.process.pid
 
     def stop(self, sig: int = signal.SIGTERM, timeout: float = 10.0) -> tuple[int, str]:
-        """Send ``sig``, wait for the exit; (exit status, stderr)."""
+        """Send ``sig`` (unless it already exited), wait for the exit; (exit status, stderr)."""
         if self.process.poll() is None:
             self.process.send_signal(sig)
         try:

@@ -22,6 +22,11 @@ import numpy as np
 from planner.guarantees import check_positions
 from planner.obstacles import Obstacles
 
+#: The plan flies at exactly rho_c from obstacles and 2 rho_c from other UAVs by design, so the
+#: flown distance hovers around those bounds: a "near" warning is raised when a bound is crossed
+#: and re-armed only once the distance is this much (m) above it again.
+NEAR_HYSTERESIS_M = 2.0
+
 
 @dataclass(frozen=True)
 class MonitorEvent:
@@ -140,6 +145,7 @@ class SafetyMonitor:
                 MonitorEvent(
                     t, "warning", "near_uav", f"UAVs {who}: {pair:.2f} m apart (< 2 rho_c)"
                 ),
+                cleared=pair > 2 * rho + NEAR_HYSTERESIS_M,
             )
         if np.isfinite(obstacle):
             events += self._condition(
@@ -159,15 +165,19 @@ class SafetyMonitor:
                 MonitorEvent(
                     t, "warning", "near_obstacle", f"a UAV is {obstacle:.2f} m from an obstacle"
                 ),
+                cleared=obstacle > rho + NEAR_HYSTERESIS_M,
             )
         return events
 
-    def _condition(self, key: tuple, active: bool, event: MonitorEvent) -> list[MonitorEvent]:
-        """Report `event` when the condition starts; forget it when it clears."""
+    def _condition(
+        self, key: tuple, active: bool, event: MonitorEvent, cleared: bool | None = None
+    ) -> list[MonitorEvent]:
+        """Report `event` when the condition starts; forget it once `cleared` (default: as soon
+        as it is no longer active)."""
         if active and key not in self._active:
             self._active.add(key)
             return [event]
-        if not active:
+        if (not active) if cleared is None else cleared:
             self._active.discard(key)
         return []
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs.monitors import LinkMonitor, SafetyMonitor
+from gcs.monitors import NEAR_HYSTERESIS_M, LinkMonitor, SafetyMonitor
 from gcs.runtime import MissionClock, VehicleClock
 from planner.obstacles import Obstacles
 
@@ -47,6 +47,21 @@ def test_distances_warn_below_the_margins_and_fail_on_contact():
     safety.positions(3.0, far)  # cleared ...
     again = safety.positions(4.0, crash)  # ... and reported again
     assert {e.kind for e in again} >= {"collision_uav", "collision_obstacle"}
+
+
+def test_a_distance_hovering_at_the_margin_warns_once_until_it_clearly_clears():
+    """The plan flies at exactly rho_c from obstacles: noise around 5 m must not flood the log."""
+    safety = monitor(size=1)
+
+    def at(distance: float) -> np.ndarray:
+        return np.array([[20.0 + distance, 0.0]])  # `distance` m east of the box
+
+    hovering = [4.98, 5.01, 4.97, 5.02, 4.99, 6.5, 4.96]  # never clearly above 5 + hysteresis
+    warnings = [e for k, d in enumerate(hovering) for e in safety.positions(float(k), at(d))]
+    assert [e.kind for e in warnings] == ["near_obstacle"]
+    assert safety.positions(10.0, at(5.0 + NEAR_HYSTERESIS_M + 0.1)) == []  # clearly away ...
+    again = safety.positions(11.0, at(4.9))  # ... so the next approach is reported
+    assert [e.kind for e in again] == ["near_obstacle"]
 
 
 def test_unknown_positions_do_not_count_as_connected_samples():

@@ -407,31 +407,27 @@ def transforms(
 ) -> FrameTransforms:
     """`map -> uav<n>` (the UAV's position) and `map -> uav<n>/target` (V_n(t) at the cruise
     altitude) for every UAV whose position (resp. target) is known."""
-    out = []
-    for index, (x, y, z) in enumerate(np.asarray(positions, float).tolist()):
-        if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
-            out.append(
-                FrameTransform(
-                    timestamp=stamp,
-                    parent_frame_id=MAP_FRAME,
-                    child_frame_id=uav_frame(index + 1),
-                    translation=Vector3(x=x, y=y, z=z),
-                    rotation=IDENTITY,
-                )
-            )
+    xyz = np.asarray(positions, float).reshape(-1, 3)
+    out = _placed(uav_frame, xyz, np.isfinite(xyz).all(axis=1), stamp)
     if targets is not None:
-        for index, (x, y) in enumerate(np.asarray(targets, float).tolist()):
-            if math.isfinite(x) and math.isfinite(y):
-                out.append(
-                    FrameTransform(
-                        timestamp=stamp,
-                        parent_frame_id=MAP_FRAME,
-                        child_frame_id=target_frame(index + 1),
-                        translation=Vector3(x=x, y=y, z=altitude),
-                        rotation=IDENTITY,
-                    )
-                )
+        xyz = _with_z(targets, altitude)
+        out += _placed(target_frame, xyz, np.isfinite(xyz[:, :2]).all(axis=1), stamp)
     return FrameTransforms(transforms=out)
+
+
+def _placed(frame_of, xyz: np.ndarray, known: np.ndarray, stamp: Timestamp) -> list:
+    """`map -> frame_of(n)` at row n - 1 of `xyz`, for every row that is `known`."""
+    return [
+        FrameTransform(
+            timestamp=stamp,
+            parent_frame_id=MAP_FRAME,
+            child_frame_id=frame_of(index + 1),
+            translation=Vector3(x=x, y=y, z=z),
+            rotation=IDENTITY,
+        )
+        for index, (x, y, z) in enumerate(xyz.tolist())
+        if known[index]
+    ]
 
 
 # --------------------------------------------------------------------------- Map panel

@@ -58,6 +58,31 @@ def rectangle_rings(rectangles: np.ndarray) -> np.ndarray:
     return np.stack([x, y], axis=-1) + rect[:, None, :2]
 
 
+def _rectangles_scenario(
+    name: str,
+    rectangles: np.ndarray,
+    start: np.ndarray,
+    goal: np.ndarray,
+    safety_margin: float,
+    radio_range: float,
+    area: tuple[float, float, float, float],
+) -> Scenario:
+    """A map of rectangular obstacles (cx, cy, w, h, deg), both rows along A->B
+    (theta_A = theta_B = 0)."""
+    return Scenario(
+        name=name,
+        obstacles=Obstacles(polygons=tuple(rectangle_rings(rectangles))),
+        start=start,
+        goal=goal,
+        start_angle_deg=0.0,
+        goal_angle_deg=0.0,
+        safety_margin=safety_margin,
+        radio_range=radio_range,
+        rectangles=rectangles,
+        area=area,
+    )
+
+
 def _keep_out(
     start: np.ndarray,
     goal: np.ndarray,
@@ -122,18 +147,7 @@ def paper_scenario(seed: int = 25) -> Scenario:
     rect = _sample_rectangles(
         rng, 10, area, (40.0, 400.0), keep_out, rho + _SPARE, rotate=False, gap=None
     )
-    return Scenario(
-        name=f"paper-table-ii-seed{seed}",
-        obstacles=Obstacles(polygons=tuple(rectangle_rings(rect))),
-        start=start,
-        goal=goal,
-        start_angle_deg=0.0,
-        goal_angle_deg=0.0,
-        safety_margin=rho,
-        radio_range=220.0,
-        rectangles=rect,
-        area=area,
-    )
+    return _rectangles_scenario(f"paper-table-ii-seed{seed}", rect, start, goal, rho, 220.0, area)
 
 
 def random_buildings(
@@ -160,18 +174,8 @@ def random_buildings(
         rotate=True,
         gap=2.0 * safety_margin + 1.0,
     )
-    return Scenario(
-        name=f"random-{n}-buildings-seed{seed}",
-        obstacles=Obstacles(polygons=tuple(rectangle_rings(rect))),
-        start=start,
-        goal=goal,
-        start_angle_deg=0.0,
-        goal_angle_deg=0.0,
-        safety_margin=safety_margin,
-        radio_range=radio_range,
-        rectangles=rect,
-        area=area,
-    )
+    name = f"random-{n}-buildings-seed{seed}"
+    return _rectangles_scenario(name, rect, start, goal, safety_margin, radio_range, area)
 
 
 def city_grid(
@@ -191,17 +195,14 @@ def city_grid(
         [centre, np.full((len(centre), 2), block), np.zeros(len(centre))]
     ).astype(float)
     width, height = street + cols * pitch, street + rows * pitch
-    return Scenario(
-        name=f"city-grid-{cols}x{rows}",
-        obstacles=Obstacles(polygons=tuple(rectangle_rings(rect))),
-        start=np.array([street / 2.0, street / 2.0]),
-        goal=np.array([width - street / 2.0, height - street / 2.0]),
-        start_angle_deg=0.0,
-        goal_angle_deg=0.0,
-        safety_margin=safety_margin,
-        radio_range=radio_range,
-        rectangles=rect,
-        area=(0.0, 0.0, width, height),
+    return _rectangles_scenario(
+        f"city-grid-{cols}x{rows}",
+        rect,
+        np.array([street / 2.0, street / 2.0]),
+        np.array([width - street / 2.0, height - street / 2.0]),
+        safety_margin,
+        radio_range,
+        (0.0, 0.0, width, height),
     )
 
 

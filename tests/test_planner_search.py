@@ -12,30 +12,9 @@ from planner.formation import SQRT2, collision_spacing, min_fleet_size, parking_
 from planner.graph import GOAL, KIND_OBSTACLE, KIND_ROW, START, edge_ok, graph_nodes
 from planner.obstacles import Obstacles
 from planner.scenarios import city_grid, paper_scenario, scenario_problem
-from planner.search import PathProblem, plan_path
+from planner.search import plan_path
 from planner.validity import check_path
-
-RHO = 5.0
-
-
-NO_OBSTACLES = Obstacles()
-
-
-def problem(start, goal, obstacles=NO_OBSTACLES, theta_a=0.0, theta_b=0.0, **kw) -> PathProblem:
-    return PathProblem(
-        start=np.array(start, float),
-        goal=np.array(goal, float),
-        start_angle_deg=theta_a,
-        goal_angle_deg=theta_b,
-        safety_margin=kw.pop("safety_margin", RHO),
-        radio_range=kw.pop("radio_range", 220.0),
-        obstacles=obstacles,
-        **kw,
-    )
-
-
-def square(x0, y0, size):
-    return np.array([[x0, y0], [x0 + size, y0], [x0 + size, y0 + size], [x0, y0 + size]], float)
+from tests.planner_maps import RHO, problem, square
 
 
 def ring_walls(ring):

@@ -11,24 +11,7 @@ from planner.formation import parking_rows
 from planner.obstacles import Obstacles
 from planner.search import PathProblem
 from planner.validity import check_path, check_rows, precheck
-
-RHO = 5.0
-
-
-NO_OBSTACLES = Obstacles()
-
-
-def problem(start, goal, obstacles=NO_OBSTACLES, theta_a=0.0, theta_b=0.0, **kw) -> PathProblem:
-    return PathProblem(
-        start=np.array(start, float),
-        goal=np.array(goal, float),
-        start_angle_deg=theta_a,
-        goal_angle_deg=theta_b,
-        safety_margin=RHO,
-        radio_range=kw.pop("radio_range", 220.0),
-        obstacles=obstacles,
-        **kw,
-    )
+from tests.planner_maps import RHO, problem, square
 
 
 def rows_for(pb: PathProblem, fleet_size: int = 1):
@@ -41,10 +24,6 @@ def rows_for(pb: PathProblem, fleet_size: int = 1):
         pb.safety_margin,
         pb.parking,
     )
-
-
-def square(x0, y0, size):
-    return np.array([[x0, y0], [x0 + size, y0], [x0 + size, y0 + size], [x0, y0 + size]], float)
 
 
 # A wall from (0,0) to (0,100); A and B on its margin lines at exactly rho_c; the only route

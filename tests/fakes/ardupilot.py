@@ -42,14 +42,16 @@ from tests.fakes.common import (
     IGNORE_VELOCITY,
     PREARM_CHECK,
     UNSUPPORTED,
+    FakeAutopilot,
     Home,
-    Outbox,
-    PointMass,
     command_ack,
     enu_to_global,
-    global_to_enu,
-    heading_cdeg,
+    global_position_int,
+    gps_raw_int,
+    local_position_ned,
     mavlink,
+    position_target_local_ned,
+    setpoint_enu,
     text,
 )
 
@@ -114,7 +116,7 @@ class ArduCopterParams:
     land_disarm: float = 2.1  # touchdown -> auto-disarm in LAND (A1: 105.5 -> 107.6)
 
 
-class ArduCopterModel:
+class ArduCopterModel(FakeAutopilot):
     """The state machine of one ArduCopter SITL instance as a ground station sees it."""
 
     def __init__(
@@ -137,31 +139,22 @@ class ArduCopterModel:
         out this long (wall seconds) after the ACK; 0: just before it, as recorded (1 ms).
         `info_text_with_refusals`: an INFO text sent with every refusing ACK, just before it
         (as `EKF3 IMU0 is using GPS` (A1 41.52) can be near an ARM): never the reason."""
-        self.system_id = system_id
+        super().__init__(system_id=system_id, speedup=speedup)
         self.boot_home = home
         self.home = home
-        self.speedup = speedup
         self.timeline = timeline
         self.params = params
         self.known_modes = known_modes
         self.extra_arm_refusals = extra_arm_refusals
         self.refusal_text_delay_s = refusal_text_delay_s
         self.info_text_with_refusals = info_text_with_refusals
-        self.outbox = Outbox()
         self.mode = STABILIZE
         self.armed = False
-        self.body = PointMass(gain=1.0)
-        self.landed_state = mavlink.MAV_LANDED_STATE_ON_GROUND
-        self.commands: list[tuple[float, int, int]] = []  # (t, command, result) answered
-        self._gcs = (255, 190)
         self._started = False
-        self._last_tick: float | None = None
         self._next_heartbeat = 0.0
         self._ready_done = False
         self._origin_sent = False
         self._gps_text_sent = False
-        self.intervals: dict[int, float] = {}
-        self._last_stream: dict[int, float] = {}
         self._prearm_bit = False
         self._next_prearm_check = timeline.prearm_phase
         self._next_report = timeline.report_phase
@@ -178,9 +171,6 @@ class ArduCopterModel:
 
     # --- timeline helpers (internal processes are compressed by `speedup`) --------------------
 
-    def _after(self, now: float, event: float) -> bool:
-        return now * self.speedup >= event
-
     @property
     def booting(self) -> bool:
         return not self._ready_done
@@ -188,28 +178,13 @@ class ArduCopterModel:
     def position_estimate(self, now: float) -> bool:
         return self._after(now, self.timeline.position_estimate)
 
-    def flying(self) -> bool:
-        return self.landed_state != mavlink.MAV_LANDED_STATE_ON_GROUND
-
     # --- inputs ---------------------------------------------------------------------------------
 
-    def handle(self, msg, now: float) -> None:
-        """React to one message from a ground station."""
-        kind = msg.get_type()
-        target = getattr(msg, "target_system", self.system_id)
-        if target not in (0, self.system_id):
-            return
-        if kind in ("COMMAND_LONG", "COMMAND_INT"):
-            self._gcs = (msg.get_srcSystem(), msg.get_srcComponent())
-            self._command(msg, now)
-        elif kind == "SET_MODE":
-            self._gcs = (msg.get_srcSystem(), msg.get_srcComponent())
-            if msg.custom_mode in self.known_modes:
-                self._set_mode(int(msg.custom_mode), now)
-            else:
-                self.outbox.send(now, text(4, f"No such mode {msg.custom_mode}"))
-        elif kind in ("SET_POSITION_TARGET_GLOBAL_INT", "SET_POSITION_TARGET_LOCAL_NED"):
-            self._setpoint(msg, now)
+    def _mode_message(self, msg, now: float) -> None:
+        if msg.custom_mode in self.known_modes:
+            self._set_mode(int(msg.custom_mode), now)
+        else:
+            self.outbox.send(now, text(4, f"No such mode {msg.custom_mode}"))
 
     def _ack(self, msg, result: int, now: float):
         self.commands.append((now, int(msg.command), result))
@@ -244,7 +219,7 @@ class ArduCopterModel:
                 self._target_mask = 3576
             self.outbox.send(now, self._ack(msg, ACCEPTED if ok else FAILED, now))
         elif cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            self.intervals[int(p1)] = float(p2)
+            self.streams.intervals[int(p1)] = float(p2)
             self.outbox.send(now, self._ack(msg, ACCEPTED, now))
         elif cmd == mavlink.MAV_CMD_REQUEST_MESSAGE:
             reply = self._requested(int(p1), now)
@@ -347,18 +322,10 @@ class ArduCopterModel:
         if self.mode != GUIDED or not self.armed or not self.flying():
             return
         mask = int(msg.type_mask)
-        if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
-            if msg.coordinate_frame not in (0, 3, 5, 6):
-                return
-            relative = msg.coordinate_frame in (3, 6)
-            alt = msg.alt + (self.home.alt if relative else 0.0)
-            position = global_to_enu(self.boot_home, msg.lat_int / 1e7, msg.lon_int / 1e7, alt)
-            velocity = np.array([msg.vy, msg.vx, -msg.vz], dtype=float)  # NED -> ENU
-        else:
-            if msg.coordinate_frame != 1:
-                return
-            position = np.array([msg.y, msg.x, -msg.z], dtype=float)
-            velocity = np.array([msg.vy, msg.vx, -msg.vz], dtype=float)
+        decoded = setpoint_enu(msg, self.boot_home, self.home.alt)
+        if decoded is None:
+            return
+        position, velocity = decoded
         use_position = not mask & IGNORE_POSITION
         use_velocity = not mask & IGNORE_VELOCITY
         if not (use_position or use_velocity):
@@ -381,8 +348,7 @@ class ArduCopterModel:
         if not self._started:
             self._started = True
             self.outbox.send(now, text(6, "Calibrating barometer"))
-        dt = 0.0 if self._last_tick is None else min(max(now - self._last_tick, 0.0), 0.2)
-        self._last_tick = now
+        dt = self._elapsed(now)
         self._boot(now)
         self._prearm(now)
         self._fly(now, dt)
@@ -522,20 +488,9 @@ class ArduCopterModel:
         )  # fmt: skip
 
     def _streams(self, now: float) -> None:
-        for message_id, interval_us in self.intervals.items():
-            if interval_us < 0:
-                continue
-            period = (interval_us or 1e6) / 1e6 / self.speedup
-            last = self._last_stream.get(message_id)
-            if last is not None and now - last < period:
-                continue
-            message = self._stream_message(message_id, now)
-            if message is None:
-                continue
-            self._last_stream[message_id] = (
-                now if last is None else max(last + period, now - period)
-            )
-            self.outbox.send(now, message)
+        # Nothing streams until asked; an interval of 0 asks for 1 Hz.
+        requested = dict.fromkeys(self.streams.intervals, 1.0)
+        self.streams.send_due(now, requested, self.speedup, self._stream_message, self.outbox)
 
     def _stream_message(self, message_id: int, now: float):
         m = mavlink
@@ -549,27 +504,16 @@ class ArduCopterModel:
         if message_id == m.MAVLINK_MSG_ID_GPS_RAW_INT:
             if not self._after(now, self.timeline.gps_fix):
                 return m.MAVLink_gps_raw_int_message(0, 0, 0, 0, 0, 65535, 65535, 0, 0, 0)
-            lat, lon, alt = enu_to_global(self.boot_home, pos)
-            return m.MAVLink_gps_raw_int_message(
-                int(now * self.speedup * 1e6), 6, int(round(lat * 1e7)), int(round(lon * 1e7)),
-                int(round(alt * 1000)), 121, 200, int(np.hypot(vel[0], vel[1]) * 100),
-                heading_cdeg(vel), 10,
-            )  # fmt: skip
+            usec = int(now * self.speedup * 1e6)
+            return gps_raw_int(self.boot_home, pos, vel, usec, fix_type=6, eph=121, epv=200)
         if message_id == m.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
             if not self._after(now, self.timeline.gps_fix):
                 return m.MAVLink_global_position_int_message(t_ms, 0, 0, 0, 0, 0, 0, 0, 0)
-            lat, lon, alt = enu_to_global(self.boot_home, pos)
-            return m.MAVLink_global_position_int_message(
-                t_ms, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
-                int(round((alt - self.home.alt) * 1000)), int(round(vel[1] * 100)),
-                int(round(vel[0] * 100)), int(round(-vel[2] * 100)), heading_cdeg(vel),
-            )  # fmt: skip
+            return global_position_int(self.boot_home, pos, vel, t_ms, self.home.alt)
         if message_id == m.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
             if not self.position_estimate(now):
                 return None
-            return m.MAVLink_local_position_ned_message(
-                t_ms, pos[1], pos[0], -pos[2], vel[1], vel[0], -vel[2]
-            )
+            return local_position_ned(pos, vel, t_ms)
         if message_id == m.MAVLINK_MSG_ID_EKF_STATUS_REPORT:
             return m.MAVLink_ekf_status_report_message(
                 self._ekf_flags(now), 0.0, 0.0, 0.0, 0.0, 0.0
@@ -579,12 +523,9 @@ class ArduCopterModel:
         if message_id == m.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED:
             if self.mode != GUIDED:
                 return None
-            target = self._target
-            return m.MAVLink_position_target_local_ned_message(
-                t_ms, 1, self._target_mask, target[1], target[0], -target[2],
-                self._feed_forward[1], self._feed_forward[0], -self._feed_forward[2],
-                0.0, 0.0, 0.0, 0.0, 0.0,
-            )  # fmt: skip
+            return position_target_local_ned(
+                self._target, self._feed_forward, self._target_mask, t_ms
+            )
         return None  # e.g. POSITION_TARGET_GLOBAL_INT: accepted, never sent (A1)
 
     def _ekf_flags(self, now: float) -> int:

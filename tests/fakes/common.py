@@ -18,6 +18,7 @@ import selectors
 import struct
 import threading
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -209,6 +210,175 @@ def heading_cdeg(velocity: np.ndarray) -> int:
     if math.hypot(velocity[0], velocity[1]) < 0.2:
         return 0
     return int(round(math.degrees(math.atan2(velocity[0], velocity[1])) % 360.0 * 100)) % 36000
+
+
+def setpoint_enu(msg, origin: Home, home_alt: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """A SET_POSITION_TARGET_GLOBAL_INT / _LOCAL_NED as ENU position and velocity (m, m/s) from
+    `origin`; None in a frame neither fake follows. Relative altitudes count from `home_alt`."""
+    if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
+        if msg.coordinate_frame not in (0, 3, 5, 6):
+            return None
+        relative = msg.coordinate_frame in (3, 6)
+        alt = msg.alt + (home_alt if relative else 0.0)
+        position = global_to_enu(origin, msg.lat_int / 1e7, msg.lon_int / 1e7, alt)
+    else:
+        if msg.coordinate_frame != 1:
+            return None
+        position = np.array([msg.y, msg.x, -msg.z], dtype=float)
+    velocity = np.array([msg.vy, msg.vx, -msg.vz], dtype=float)  # NED -> ENU
+    return position, velocity
+
+
+# --- telemetry ----------------------------------------------------------------------------------
+
+
+def gps_raw_int(
+    origin: Home, enu: np.ndarray, velocity: np.ndarray, time_usec: int, fix_type: int,
+    eph: int, epv: int,
+) -> mavlink.MAVLink_gps_raw_int_message:  # fmt: skip
+    """GPS_RAW_INT of a vehicle at `enu` metres from `origin`, moving at `velocity` (ENU)."""
+    lat, lon, alt = enu_to_global(origin, enu)
+    return mavlink.MAVLink_gps_raw_int_message(
+        time_usec, fix_type, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
+        eph, epv, int(np.hypot(velocity[0], velocity[1]) * 100), heading_cdeg(velocity), 10,
+    )  # fmt: skip
+
+
+def global_position_int(
+    origin: Home, enu: np.ndarray, velocity: np.ndarray, time_boot_ms: int, home_alt: float
+) -> mavlink.MAVLink_global_position_int_message:
+    """GLOBAL_POSITION_INT of a vehicle at `enu` metres from `origin` (relative_alt from
+    `home_alt`), moving at `velocity` (ENU)."""
+    lat, lon, alt = enu_to_global(origin, enu)
+    return mavlink.MAVLink_global_position_int_message(
+        time_boot_ms, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
+        int(round((alt - home_alt) * 1000)), int(round(velocity[1] * 100)),
+        int(round(velocity[0] * 100)), int(round(-velocity[2] * 100)), heading_cdeg(velocity),
+    )  # fmt: skip
+
+
+def local_position_ned(
+    enu: np.ndarray, velocity: np.ndarray, time_boot_ms: int
+) -> mavlink.MAVLink_local_position_ned_message:
+    """LOCAL_POSITION_NED of an ENU position and velocity."""
+    return mavlink.MAVLink_local_position_ned_message(
+        time_boot_ms, enu[1], enu[0], -enu[2], velocity[1], velocity[0], -velocity[2]
+    )
+
+
+def position_target_local_ned(
+    target: np.ndarray, feed_forward: np.ndarray, type_mask: int, time_boot_ms: int
+) -> mavlink.MAVLink_position_target_local_ned_message:
+    """POSITION_TARGET_LOCAL_NED (MAV_FRAME_LOCAL_NED) of an ENU target and feed-forward."""
+    return mavlink.MAVLink_position_target_local_ned_message(
+        time_boot_ms, 1, type_mask, target[1], target[0], -target[2],
+        feed_forward[1], feed_forward[0], -feed_forward[2], 0.0, 0.0, 0.0, 0.0, 0.0,
+    )  # fmt: skip
+
+
+@dataclass
+class StreamScheduler:
+    """Periodic telemetry on a fixed phase, each stream at the interval a ground station set.
+
+    `intervals`: what MAV_CMD_SET_MESSAGE_INTERVAL asked, in microseconds (negative: off, 0:
+    the autopilot's default rate). A stream that falls behind catches up at most one period.
+    """
+
+    intervals: dict[int, float] = field(default_factory=dict)
+    _last_sent: dict[int, float] = field(default_factory=dict)
+
+    def send_due(
+        self,
+        now: float,
+        default_rates_hz: Mapping[int, float],
+        speedup: float,
+        build: Callable[[int, float], object | None],
+        outbox: Outbox,
+    ) -> None:
+        """Queue in `outbox` every stream of `default_rates_hz` that is due at `now`; `build`
+        makes the message (None: nothing to send now, try again on the next tick)."""
+        for message_id, rate_hz in default_rates_hz.items():
+            interval_us = self.intervals.get(message_id, 0.0)
+            if interval_us < 0:
+                continue
+            period = (interval_us / 1e6 if interval_us > 0 else 1.0 / rate_hz) / speedup
+            last = self._last_sent.get(message_id)
+            if last is not None and now - last < period:
+                continue
+            message = build(message_id, now)
+            if message is None:
+                continue
+            self._last_sent[message_id] = now if last is None else max(last + period, now - period)
+            outbox.send(now, message)
+
+
+# --- the model's common part -------------------------------------------------------------------
+
+#: The messages that carry a position/velocity target.
+SETPOINT_TYPES = ("SET_POSITION_TARGET_GLOBAL_INT", "SET_POSITION_TARGET_LOCAL_NED")
+
+
+class FakeAutopilot:
+    """What both fake autopilots do alike: messages for another system are ignored, ACKs go to
+    the sender of the last command, the boot timeline is compressed by `speedup`, the vehicle is
+    a `PointMass`, telemetry streams run on a `StreamScheduler`.
+
+    A subclass answers `_command`, `_mode_message` (SET_MODE) and `_setpoint`.
+    """
+
+    def __init__(self, *, system_id: int, speedup: float) -> None:
+        self.system_id = system_id
+        self.speedup = speedup
+        self.outbox = Outbox()
+        self.body = PointMass(gain=1.0)
+        self.landed_state = mavlink.MAV_LANDED_STATE_ON_GROUND
+        self.commands: list[tuple[float, int, int]] = []  # (t, command, result) answered
+        self.streams = StreamScheduler()
+        self._gcs = (255, 190)  # (system, component) of the last command's sender
+        self._last_tick: float | None = None
+
+    @property
+    def intervals(self) -> dict[int, float]:
+        """Message intervals a ground station set (microseconds, by message id)."""
+        return self.streams.intervals
+
+    def _after(self, now: float, event: float) -> bool:
+        """Whether `event` (seconds after the first HEARTBEAT at speedup 1) has happened."""
+        return now * self.speedup >= event
+
+    def flying(self) -> bool:
+        return self.landed_state != mavlink.MAV_LANDED_STATE_ON_GROUND
+
+    def handle(self, msg, now: float) -> None:
+        """React to one message from a ground station."""
+        kind = msg.get_type()
+        target = getattr(msg, "target_system", self.system_id)
+        if target not in (0, self.system_id):
+            return
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):
+            self._gcs = (msg.get_srcSystem(), msg.get_srcComponent())
+            self._command(msg, now)
+        elif kind == "SET_MODE":
+            self._gcs = (msg.get_srcSystem(), msg.get_srcComponent())
+            self._mode_message(msg, now)
+        elif kind in SETPOINT_TYPES:
+            self._setpoint(msg, now)
+
+    def _command(self, msg, now: float) -> None:
+        raise NotImplementedError
+
+    def _mode_message(self, msg, now: float) -> None:
+        raise NotImplementedError
+
+    def _setpoint(self, msg, now: float) -> None:
+        raise NotImplementedError
+
+    def _elapsed(self, now: float) -> float:
+        """Seconds since the previous tick: 0 on the first, at most 0.2 (a stalled thread
+        does not make the vehicle jump)."""
+        dt = 0.0 if self._last_tick is None else min(max(now - self._last_tick, 0.0), 0.2)
+        self._last_tick = now
+        return dt
 
 
 # --- the UDP endpoint ---------------------------------------------------------------------------

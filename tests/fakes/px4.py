@@ -45,14 +45,17 @@ from tests.fakes.common import (
     TEMPORARILY_REJECTED,
     UNSUPPORTED,
     ExtraMessage,
+    FakeAutopilot,
     Home,
-    Outbox,
-    PointMass,
     command_ack,
     enu_to_global,
+    global_position_int,
     global_to_enu,
-    heading_cdeg,
+    gps_raw_int,
+    local_position_ned,
     mavlink,
+    position_target_local_ned,
+    setpoint_enu,
     text,
 )
 
@@ -153,7 +156,7 @@ class Px4Params:
     gps_noise_m: float = 0.7  # standard deviation of the GPS offset per axis (m)
 
 
-class Px4Model:
+class Px4Model(FakeAutopilot):
     """The state machine of one PX4 SITL instance as a ground station sees it."""
 
     def __init__(
@@ -171,12 +174,10 @@ class Px4Model:
         """`initial_mode`: the mode it is in when the GCS connects (AUTO.LOITER after boot;
         OFFBOARD after a flight that ended like P1). `ignored_modes`: custom modes it answers
         with two ACCEPTED and does not enter, as P2 4.58 shows for an unknown main mode."""
-        self.system_id = system_id
+        super().__init__(system_id=system_id, speedup=speedup)
         self.boot_spot = home
-        self.speedup = speedup
         self.timeline = timeline
         self.params = params
-        self.outbox = Outbox()
         rng = np.random.default_rng(seed)
         self.gps_offset = np.clip(rng.normal(0.0, params.gps_noise_m, 3), -2.0, 2.0)
         self.home: Home | None = None
@@ -186,12 +187,7 @@ class Px4Model:
         self.mode_after_disarm = initial_mode
         self.armed = False
         self.failsafe = False
-        self.body = PointMass(gain=1.0)
-        self.landed_state = mavlink.MAV_LANDED_STATE_ON_GROUND
-        self.commands: list[tuple[float, int, int]] = []  # (t, command, verdict)
-        self._gcs = (255, 190)
         self._started = False
-        self._last_tick: float | None = None
         self._next_heartbeat = 0.0
         self._next_home = timeline.home
         self._events_sequence = 65526
@@ -207,14 +203,9 @@ class Px4Model:
         self._takeoff_alt_amsl: float | None = None
         self._touchdown_at: float | None = None
         self._landing_announced = False
-        self.intervals: dict[int, float] = {}
-        self._last_stream: dict[int, float] = {}
         self._gimbal: list[tuple[float, int]] = []
 
     # --- state ----------------------------------------------------------------------------------
-
-    def _after(self, now: float, event: float) -> bool:
-        return now * self.speedup >= event
 
     def position_valid(self, now: float) -> bool:
         return self._after(now, self.timeline.armable)
@@ -230,9 +221,6 @@ class Px4Model:
         if not self.position_valid(now) or self.failsafe:
             return False
         return self.mode != OFFBOARD or self.signal(now)
-
-    def flying(self) -> bool:
-        return self.landed_state != mavlink.MAV_LANDED_STATE_ON_GROUND
 
     def reported_enu(self) -> np.ndarray:
         """Where the GPS says the vehicle is (true position + the GPS offset)."""
@@ -275,24 +263,13 @@ class Px4Model:
 
     # --- inputs ---------------------------------------------------------------------------------
 
-    def handle(self, msg, now: float) -> None:
-        kind = msg.get_type()
-        target = getattr(msg, "target_system", self.system_id)
-        if target not in (0, self.system_id):
-            return
-        if kind in ("COMMAND_LONG", "COMMAND_INT"):
-            self._gcs = (msg.get_srcSystem(), msg.get_srcComponent())
-            self._command(msg, now)
-        elif kind == "SET_MODE":
-            self._gcs = (msg.get_srcSystem(), msg.get_srcComponent())
-            main = (int(msg.custom_mode) >> 16) & 0xFF
-            sub = (int(msg.custom_mode) >> 24) & 0xFF
-            verdict = self._change_mode(main, sub, now)
-            ack = command_ack(mavlink.MAV_CMD_DO_SET_MODE, verdict, *self._gcs)
-            self.commands.append((now, mavlink.MAV_CMD_DO_SET_MODE, verdict))
-            self.outbox.send(now, ack)
-        elif kind in ("SET_POSITION_TARGET_GLOBAL_INT", "SET_POSITION_TARGET_LOCAL_NED"):
-            self._setpoint(msg, now)
+    def _mode_message(self, msg, now: float) -> None:
+        main = (int(msg.custom_mode) >> 16) & 0xFF
+        sub = (int(msg.custom_mode) >> 24) & 0xFF
+        verdict = self._change_mode(main, sub, now)
+        ack = command_ack(mavlink.MAV_CMD_DO_SET_MODE, verdict, *self._gcs)
+        self.commands.append((now, mavlink.MAV_CMD_DO_SET_MODE, verdict))
+        self.outbox.send(now, ack)
 
     def _command(self, msg, now: float) -> None:
         cmd = int(msg.command)
@@ -349,7 +326,7 @@ class Px4Model:
             self.outbox.send(now, self._ack(msg, result, now))
             return
         if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            self.intervals[int(msg.param1)] = float(msg.param2)
+            self.streams.intervals[int(msg.param1)] = float(msg.param2)
         elif cmd != mavlink.MAV_CMD_DO_CHANGE_SPEED:
             self.commands.append((now, cmd, UNSUPPORTED))
             self.outbox.send(now, self._ack(msg, UNSUPPORTED, now))
@@ -457,19 +434,12 @@ class Px4Model:
 
     def _setpoint(self, msg, now: float) -> None:
         mask = int(msg.type_mask)
-        if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
-            if msg.coordinate_frame not in (0, 3, 5, 6):
-                return
-            relative = msg.coordinate_frame in (3, 6)
-            home_alt = self.home.alt if self.home else self.boot_spot.alt
-            alt = msg.alt + (home_alt if relative else 0.0)
-            reported = global_to_enu(self.boot_spot, msg.lat_int / 1e7, msg.lon_int / 1e7, alt)
-            position = reported - self.gps_offset
-        else:
-            if msg.coordinate_frame != 1:
-                return
-            position = np.array([msg.y, msg.x, -msg.z], dtype=float) - self.gps_offset
-        velocity = np.array([msg.vy, msg.vx, -msg.vz], dtype=float)
+        home_alt = self.home.alt if self.home else self.boot_spot.alt
+        decoded = setpoint_enu(msg, self.boot_spot, home_alt)
+        if decoded is None:
+            return
+        reported, velocity = decoded
+        position = reported - self.gps_offset
         if not np.all(np.isfinite(position)) or not np.all(np.isfinite(velocity)):
             return
         self._last_setpoint = now
@@ -499,8 +469,7 @@ class Px4Model:
                 ExtraMessage("CURRENT_EVENT_SEQUENCE", sequence=self._events_sequence, flags=1),
                 self._event(now, _EV_LOGGER),
             )
-        dt = 0.0 if self._last_tick is None else min(max(now - self._last_tick, 0.0), 0.2)
-        self._last_tick = now
+        dt = self._elapsed(now)
         self._boot(now)
         self._offboard(now)
         self._fly(now, dt)
@@ -656,21 +625,10 @@ class Px4Model:
     }
 
     def _streams(self, now: float) -> None:
-        for message_id, rate in self._DEFAULT_RATES_HZ.items():
-            interval_us = self.intervals.get(message_id, 0.0)
-            if interval_us < 0:
-                continue
-            period = (interval_us / 1e6 if interval_us > 0 else 1.0 / rate) / self.speedup
-            last = self._last_stream.get(message_id)
-            if last is not None and now - last < period:
-                continue
-            message = self._stream_message(message_id, now)
-            if message is None:
-                continue
-            self._last_stream[message_id] = (
-                now if last is None else max(last + period, now - period)
-            )
-            self.outbox.send(now, message)
+        # These stream unasked; an interval set for another message changes nothing.
+        self.streams.send_due(
+            now, self._DEFAULT_RATES_HZ, self.speedup, self._stream_message, self.outbox
+        )
 
     def _stream_message(self, message_id: int, now: float):
         m = mavlink
@@ -690,27 +648,16 @@ class Px4Model:
                 present, enabled, health, 0, 16200, -1, 100, 0, 0, 0, 0, 0, 0
             )
         if message_id == m.MAVLINK_MSG_ID_GPS_RAW_INT:
-            lat, lon, alt = enu_to_global(self.boot_spot, pos)
-            return m.MAVLink_gps_raw_int_message(
-                int(now * self.speedup * 1e6), 3, int(round(lat * 1e7)), int(round(lon * 1e7)),
-                int(round(alt * 1000)), 70, 100, int(np.hypot(vel[0], vel[1]) * 100),
-                heading_cdeg(vel), 10,
-            )  # fmt: skip
+            usec = int(now * self.speedup * 1e6)
+            return gps_raw_int(self.boot_spot, pos, vel, usec, fix_type=3, eph=70, epv=100)
         if message_id == m.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
             return m.MAVLink_extended_sys_state_message(0, self.landed_state)
         if message_id == m.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
             if not self._after(now, self.timeline.global_position) or self.home is None:
                 return None
-            lat, lon, alt = enu_to_global(self.boot_spot, pos)
-            return m.MAVLink_global_position_int_message(
-                t_ms, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
-                int(round((alt - self.home.alt) * 1000)), int(round(vel[1] * 100)),
-                int(round(vel[0] * 100)), int(round(-vel[2] * 100)), heading_cdeg(vel),
-            )  # fmt: skip
+            return global_position_int(self.boot_spot, pos, vel, t_ms, self.home.alt)
         if message_id == m.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
-            return m.MAVLink_local_position_ned_message(
-                t_ms, pos[1], pos[0], -pos[2], vel[1], vel[0], -vel[2]
-            )
+            return local_position_ned(pos, vel, t_ms)
         if message_id == m.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED:
             if not self.armed:
                 mask = 63
@@ -719,11 +666,7 @@ class Px4Model:
             else:
                 mask = 0
             target = self._target + self.gps_offset
-            ff = self._feed_forward
-            return m.MAVLink_position_target_local_ned_message(
-                t_ms, 1, mask, target[1], target[0], -target[2], ff[1], ff[0], -ff[2],
-                0.0, 0.0, 0.0, 0.0, 0.0,
-            )  # fmt: skip
+            return position_target_local_ned(target, self._feed_forward, mask, t_ms)
         if message_id == m.MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT:
             if not self.armed or (self.mode >> 16) & 0xFF != MAIN_AUTO:
                 return None

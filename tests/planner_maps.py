@@ -1,0 +1,33 @@
+"""Hand-made planning maps shared by the planner's tests: a `PathProblem` builder and squares."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.obstacles import Obstacles
+from planner.search import PathProblem
+
+#: The safety margin rho_c (m) of the hand-made maps.
+RHO = 5.0
+
+NO_OBSTACLES = Obstacles()
+
+
+def problem(start, goal, obstacles=NO_OBSTACLES, theta_a=0.0, theta_b=0.0, **kw) -> PathProblem:
+    """A->B with parking angles theta_A, theta_B (degrees), rho_c = `RHO` and rho_R = 220 m
+    unless `safety_margin` / `radio_range` say otherwise; other keywords go to `PathProblem`."""
+    return PathProblem(
+        start=np.array(start, float),
+        goal=np.array(goal, float),
+        start_angle_deg=theta_a,
+        goal_angle_deg=theta_b,
+        safety_margin=kw.pop("safety_margin", RHO),
+        radio_range=kw.pop("radio_range", 220.0),
+        obstacles=obstacles,
+        **kw,
+    )
+
+
+def square(x0, y0, size):
+    """Corners of the axis-aligned square of side `size` with its lower-left corner at x0, y0."""
+    return np.array([[x0, y0], [x0 + size, y0], [x0 + size, y0 + size], [x0, y0 + size]], float)

@@ -20,7 +20,13 @@ import sys
 from gcs.errors import EXIT_BAD_INPUT, InputError
 
 #: Command-group modules, each with `register(subparsers)`. Add a group here.
-GROUPS: tuple[str, ...] = ("gcs.cmd_mission", "gcs.cmd_speed", "gcs.cmd_log", "gcs.cmd_sitl")
+GROUPS: tuple[str, ...] = (
+    "gcs.cmd_mission",
+    "gcs.cmd_speed",
+    "gcs.cmd_log",
+    "gcs.cmd_sitl",
+    "gcs.cmd_eval",
+)
 
 
 class UsageError(Exception):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import signal
 import sys
 import time
@@ -28,8 +29,10 @@ from gcs.errors import InputError
 from gcs.link import Link
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
+from gcs.radio import medium_setup
 from gcs.recording import FlightRecorder, LiveServerError
 from gcs.runtime import MissionClock, MissionRun, RunOptions
+from gcs.signing import RunSigning
 from gcs.speed import OperatorSocket, socket_path_for
 from gcs.summary import EXIT_ABORTED, exit_status, run_json, summary_renderable
 
@@ -75,7 +78,10 @@ def register(mission_commands: argparse._SubParsersAction) -> None:
         "0 picks a free port, printed at start)",
     )
     run.add_argument(
-        "--insecure", action="store_true", help="do not sign MAVLink (signing is not built yet)"
+        "--insecure",
+        action="store_true",
+        help="do not sign MAVLink (by default the simulated fleet, and any fleet with "
+        "signing.key_file, is signed with MAVLink 2 signing): said loudly, and logged",
     )
     run.add_argument(
         "--link-wait",
@@ -183,9 +189,6 @@ def run_command(args: argparse.Namespace) -> int:
             )
         console.print(f"{mission.source}: no valid path: {plan.reason}")
         return EXIT_ABORTED
-    if args.insecure:
-        Console(stderr=True).print("[bold yellow]--insecure: MAVLink is not signed[/]")
-
     options = RunOptions(
         speedup=args.speedup,
         setpoint_rate_hz=rate,
@@ -195,7 +198,13 @@ def run_command(args: argparse.Namespace) -> int:
     clock = MissionClock(args.speedup)
     formation = plan.formation
     stderr_tty = sys.stderr.isatty()
+    simulated = mission.fleet.backend == "sim" and not (args.connect or mission.fleet.connections)
     with ExitStack() as stack:
+        signing = RunSigning(mission, insecure=args.insecure, simulated=simulated)  # bad key: 2
+        stack.callback(signing.close)
+        level, notice = signing.notice()
+        if level != "info":
+            Console(stderr=True, highlight=False).print(f"[bold yellow]{notice}[/]")
         try:
             recorder = FlightRecorder(log_path, clock, force=args.force, serve_port=args.foxglove)
         except LiveServerError as error:
@@ -206,13 +215,20 @@ def run_command(args: argparse.Namespace) -> int:
                 f"Foxglove: live on ws://127.0.0.1:{recorder.server_port}"
             )
         recorder.describe(plan, plan_json(plan), time.monotonic())
+        recorder.event(level, notice, time.monotonic(), name="signing")
+        signing.record_to(recorder.event)
 
-        if mission.fleet.backend == "sim" and not (args.connect or mission.fleet.connections):
+        if simulated:
             leaders: dict[int, list[tuple[float, float]]] = {}
             for change in mission.speed.changes:
                 if change.leader is not None:
                     leaders.setdefault(change.leader, []).append((change.at, change.speed))
-            fleet = SimFleet(sim_setup(mission, formation, args, leaders, log_path))
+            setup = sim_setup(mission, formation, args, leaders, log_path)
+            setup.radio = medium_setup(mission)
+            # the vehicles get the key; they exit once landed if this process dies (SIGKILL)
+            orphan = f"--exit-when-orphaned={os.getpid()}"
+            setup.extra_args = (*setup.extra_args, *signing.vehicle_args(), orphan)
+            fleet = SimFleet(setup)
         else:
             fleet = ExternalFleet(list(args.connect or mission.fleet.connections))
         stack.callback(fleet.close)
@@ -226,6 +242,7 @@ def run_command(args: argparse.Namespace) -> int:
             uav = index + 1
             link = Link(url, uav, capture=_capture(recorder, uav))
             stack.callback(link.close)
+            signing.apply(link, uav)
             spec = UavSpec(
                 uav_id=uav,
                 system_id=uav,
@@ -263,6 +280,7 @@ def run_command(args: argparse.Namespace) -> int:
         stack.callback(signal.signal, signal.SIGINT, previous)
         result = run.run()
         data = run_json(result, str(log_path), mission.safety_margin)
+        data["signing"] = signing.summary()
         recorder.outcome(data)
 
     if args.json:

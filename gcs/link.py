@@ -92,6 +92,12 @@ class Link:
         """Descriptor to wait on (selectors)."""
         return self._conn.fd
 
+    def setup_signing(self, secret_key: bytes, **options) -> None:
+        """MAVLink 2 signing, pymavlink's `mavfile.setup_signing`: sign what is sent and refuse
+        unsigned input unless `allow_unsigned_callback` accepts it (see `gcs.signing`); refused
+        frames are bad data, never a sign of life."""
+        self._conn.setup_signing(secret_key, **options)
+
     def send(self, message, now: float) -> None:
         """Send one message now (never blocks; a full socket buffer drops it, as UDP would)."""
         self._now = now

@@ -40,6 +40,7 @@ from gcs.drivers.base import Driver, DriverEvent, Fleet, Phase
 from gcs.geodesy import enu_to_geodetic
 from gcs.link import mavutil
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
+from gcs.radio import run_json_radio
 from gcs.speed import (
     OperatorSocket,
     ScheduledChange,
@@ -72,6 +73,14 @@ _SEVERITY_LEVEL = {
 
 #: Mission seconds a position sample may be carried forward by its velocity (distances).
 MAX_EXTRAPOLATION_S = 1.0
+#: A tick this late (mission seconds, the vehicles' setpoint timeout) is a stall of the GCS.
+STALL_S = 1.0
+#: ... and at least this late on the wall clock (the vehicles' timeouts have this floor).
+STALL_WALL_FLOOR_S = 0.25
+#: A UAV is told to land only once its reference has been still this long (mission s): if the
+#: LAND request is lost, the setpoints the vehicle keeps extrapolating carry no braking
+#: feed-forward (extrapolated for 1 s, a braking one would fly it back along the path).
+STILL_BEFORE_LANDING_S = 0.5
 #: After the last landing, how long (wall s) the GCS waits for disarming and commands in flight.
 SETTLE_WALL_S = 3.0
 
@@ -177,6 +186,7 @@ class RunResult:
     ticks: int
     interrupted: int
     fatal: bool
+    radio: dict | None = None  # the radio medium's run JSON `radio` object, if one ran
 
 
 class VehicleClock:
@@ -313,6 +323,8 @@ class MissionRun:
         self._abort_time: float | None = None
         self._settle_deadline: float | None = None
         self.ticks = 0
+        self.radio_report: dict | None = None  # the radio medium's last report
+        self._last_tick_wall: float | None = None
         self.current_speed = plan.speeds.initial
         self.tracking_now = np.full(size, np.nan)
         self.mission_time = None
@@ -478,6 +490,7 @@ class MissionRun:
         self.ticks += 1
         t = self.clock.mission_time(now)
         self.mission_time = t
+        self._check_stall(t, now)
         self._handle_interrupts(now)
         self._handle_requests(t, now)
         self._schedule_uavs(t, now)
@@ -492,6 +505,21 @@ class MissionRun:
         if now - self._last_view >= 0.2:
             self._last_view = now
             self.view.update(self, now)
+
+    def _check_stall(self, t: float, now: float) -> None:
+        """The scheduler itself stalled (the process was stopped, starved of CPU): no setpoint
+        went out for long enough that the vehicles' own failsafe made them hold. Nothing is
+        replayed: the next tick streams the targets of the present instant, the vehicles follow
+        again, and the tracking monitor measures the catch-up."""
+        gap = 0.0 if self._last_tick_wall is None else now - self._last_tick_wall
+        self._last_tick_wall = now
+        if gap * self.options.speedup < STALL_S or gap < STALL_WALL_FLOOR_S:
+            return
+        text = (
+            f"GCS scheduler stalled {gap:.2f} s ({gap * self.options.speedup:.1f} s of mission "
+            "time): no setpoints meanwhile, the vehicles held on their own failsafe"
+        )
+        self._event(MonitorEvent(t, "warning", "stall", text), now)
 
     def _handle_interrupts(self, now: float) -> None:
         while self._handled_interrupts < self.interrupts:
@@ -639,7 +667,7 @@ class MissionRun:
             if (
                 driver.phase == Phase.FOLLOWING
                 and not track.land_sent
-                and t >= arrivals[index] + self.window_s / 2
+                and t >= arrivals[index] + self.window_s / 2 + STILL_BEFORE_LANDING_S
             ):
                 offset = self._slot_offset(index, t)
                 if (
@@ -917,6 +945,10 @@ class MissionRun:
     def _poll_fleet(self, now: float) -> None:
         if self.fleet is None:
             return
+        for report in getattr(self.fleet, "radio_reports", list)():  # the radio medium's
+            self.radio_report = report
+            if self.clock.anchored:
+                self.recorder.radio({**report, "t": self.clock.mission_time(now)}, now)
         for problem in self.fleet.poll():
             t = self.clock.mission_time(now) if self.clock.anchored else 0.0
             if not self.clock.anchored or not problem.uavs:
@@ -1033,6 +1065,7 @@ class MissionRun:
             ticks=self.ticks,
             interrupted=self.interrupts,
             fatal=self.fatal,
+            radio=run_json_radio(self.radio_report),
         )
 
 

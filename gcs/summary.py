@@ -15,7 +15,7 @@ Run JSON fields (CONTRACTS.md), all times in mission seconds:
 Extra fields: `reason` (when not completed), `exit_status`, `per_uav` (tracking, control and
 landing errors, final phase), `budget` (smoothing window and bound, worst control error,
 navigation noise, against rho_c), `setpoints` (sent, achieved rate, p99 period jitter), `events`
-(the monitors' errors and warnings).
+(the monitors' errors and warnings), `radio` (when the radio medium ran: `gcs.radio`).
 """
 
 from __future__ import annotations
@@ -79,6 +79,8 @@ def run_json(result: RunResult, log_path: str, safety_margin: float) -> dict[str
             if e.level in ("error", "warning")
         ],
     }
+    if result.radio is not None:  # the radio medium ran (CONTRACTS.md)
+        out["radio"] = result.radio
     if not result.completed:
         out["reason"] = result.reason or "the mission did not complete"
     return out
@@ -106,6 +108,8 @@ def summary_renderable(result: RunResult, log_path: str, safety_margin: float) -
     )
     connected = result.connected_fraction
     top.add_row("connected", "n/a" if connected is None else f"{100 * connected:.1f} % of samples")
+    if result.radio is not None:
+        top.add_row("radio medium", radio_line(result.radio))
     rate = result.setpoint_rate_hz
     top.add_row(
         "setpoints",
@@ -170,6 +174,22 @@ def summary_renderable(result: RunResult, log_path: str, safety_margin: float) -
             events.add_row("", "", f"... {len(bad) - 30} more in the log")
         parts.append(events)
     return Group(*parts)
+
+
+def radio_line(radio: dict) -> str:
+    """One line of the radio medium's figures (connectivity, packets, delay, ground users)."""
+    connected = radio.get("connected_fraction")
+    packets = radio.get("packets") or {}
+    delay = radio.get("delay_ms") or {}
+    users = radio.get("ground_users") or {}
+    line = (
+        ("n/a" if connected is None else f"{100 * connected:.1f} %")
+        + f" of samples connected, {packets.get('received', 0)}/{packets.get('sent', 0)} packets"
+        + f" delivered, delay mean {_fmt(delay.get('mean'), 'ms')} p95 {_fmt(delay.get('p95'), 'ms')}"
+    )
+    if users.get("sent"):
+        line += f", ground users {users['received']}/{users['sent']} delivered"
+    return line
 
 
 def _num(value: float | None) -> float | None:

@@ -24,6 +24,10 @@ class Result:
     stdout: str
     stderr: str
 
+    def __iter__(self):
+        """`code, out, err = gcs_main(...)` unpacks like a tuple."""
+        return iter((self.returncode, self.stdout, self.stderr))
+
 
 @pytest.fixture
 def gcs_main(capsys: pytest.CaptureFixture[str]) -> Callable[..., Result]:

@@ -8,25 +8,15 @@ from pathlib import Path
 
 import pytest
 
-import gcs.cli
 from gcs.link import mavutil
 from gcs.recording import FlightRecorder
 from gcs.runtime import MissionClock
 
 
 @pytest.fixture
-def gcs_log(monkeypatch, capsys):
-    """`gcs ARGS` in this process, with `gcs log` registered."""
-    if "gcs.cmd_log" not in gcs.cli.GROUPS:
-        monkeypatch.setattr(gcs.cli, "GROUPS", (*gcs.cli.GROUPS, "gcs.cmd_log"))
-
-    def run(*args):
-        capsys.readouterr()
-        code = gcs.cli.main([str(a) for a in args])
-        out, err = capsys.readouterr()
-        return code, out, err
-
-    return run
+def gcs_log(gcs_main):
+    """`gcs ARGS` in this process (conftest's `gcs_main`)."""
+    return gcs_main
 
 
 def one_line_exit_2(result, *names: str) -> None:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import base64
 import json
-import os
 import selectors
 import socket
 import subprocess
@@ -26,11 +25,11 @@ from mcap.records import Schema
 from mcap_protobuf.decoder import DecoderFactory
 from pymavlink.dialects.v20 import ardupilotmega
 
-import gcs.cli
 from gcs.mission import load_mission
 from planner.formation import ParkingRows
 from planner.guarantees import check_positions
 from planner.kinematics import LineFormation, SpeedProfile
+from tests.flying import environment, gcs_command
 from tests.test_run_recording import (
     foxglove_channels,
     foxglove_connect,
@@ -47,7 +46,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 UAV_TOPICS = ("/uav{n}/fix", "/uav{n}/target", "/uav{n}/setpoint", "/uav{n}/state",
               "/mavlink/{n}/rx", "/mavlink/{n}/tx")  # fmt: skip
 FLEET_TOPICS = ("/plan", "/scene", "/tf", "/events", "/speed", "/metrics", "/fleet",
-                "/map/obstacles", "/map/plan")  # fmt: skip
+                "/map/obstacles", "/map/plan", "/radio")  # fmt: skip
 FOXGLOVE_SCHEMAS = {
     "/scene": "foxglove.SceneUpdate",
     "/tf": "foxglove.FrameTransforms",
@@ -55,24 +54,6 @@ FOXGLOVE_SCHEMAS = {
     "/map/obstacles": "foxglove.GeoJSON",
     "/map/plan": "foxglove.GeoJSON",
 }
-
-
-def launcher(*args: str) -> list[str]:
-    """`python -m gcs ARGS`, registering `gcs log` if the CLI does not yet."""
-    if "gcs.cmd_log" in gcs.cli.GROUPS:
-        return [sys.executable, "-m", "gcs", *args]
-    code = (
-        "import sys, gcs.cli as c;"
-        "c.GROUPS = tuple(dict.fromkeys((*c.GROUPS, 'gcs.cmd_log')));"
-        "sys.exit(c.main(sys.argv[1:]))"
-    )
-    return [sys.executable, "-c", code, *args]
-
-
-def environment() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-    return env
 
 
 @dataclass(frozen=True)
@@ -194,18 +175,9 @@ def read(flown) -> Read:
 
 
 @pytest.fixture
-def gcs_log(monkeypatch, capsys):
-    """`gcs ARGS` in this process, with `gcs log` registered."""
-    if "gcs.cmd_log" not in gcs.cli.GROUPS:
-        monkeypatch.setattr(gcs.cli, "GROUPS", (*gcs.cli.GROUPS, "gcs.cmd_log"))
-
-    def run(*args):
-        capsys.readouterr()
-        code = gcs.cli.main([str(a) for a in args])
-        out, err = capsys.readouterr()
-        return code, out, err
-
-    return run
+def gcs_log(gcs_main):
+    """`gcs ARGS` in this process (conftest's `gcs_main`)."""
+    return gcs_main
 
 
 # --------------------------------------------------------------------------- the recording
@@ -436,7 +408,7 @@ def _replay_and_receive(log: Path, *args: str) -> tuple[subprocess.CompletedProc
     sink.settimeout(0.2)
     url = f"udpout:127.0.0.1:{sink.getsockname()[1]}"
     process = subprocess.Popen(
-        launcher("log", "replay", str(log), "--to", url, *args),
+        gcs_command("log", "replay", str(log), "--to", url, *args),
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=environment(),
     )  # fmt: skip
     received = []

@@ -17,13 +17,7 @@ NO_PATH = REPO / "tests" / "missions" / "no-path.yaml"
 
 @pytest.fixture
 def gcs_run(monkeypatch, capsys, tmp_path):
-    """`gcs ARGS` in this process, in `tmp_path`, with `mission run` and `speed` registered."""
-    if "gcs.cmd_run" not in gcs.cmd_mission.SUBCOMMANDS:
-        monkeypatch.setattr(
-            gcs.cmd_mission, "SUBCOMMANDS", (*gcs.cmd_mission.SUBCOMMANDS, "gcs.cmd_run")
-        )
-    if "gcs.cmd_speed" not in gcs.cli.GROUPS:
-        monkeypatch.setattr(gcs.cli, "GROUPS", (*gcs.cli.GROUPS, "gcs.cmd_speed"))
+    """`gcs ARGS` in this process, in `tmp_path`."""
     monkeypatch.chdir(tmp_path)
 
     def run(*args):

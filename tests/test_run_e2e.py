@@ -12,16 +12,13 @@ import os
 import selectors
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap.reader import make_reader
 
-import gcs.cli
-import gcs.cmd_mission
+from tests.flying import children_running, environment, gcs_command, read_log, wait_line
 
 REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "examples" / "small.yaml"
@@ -29,37 +26,6 @@ SPEEDUP = "5"  # the Done-when allows up to 10; 5 leaves room on a busy 2-core m
 #: UAV 2 (the leader) gets a process of its own anyway: [1], [2], [3, 4]
 PER_PROCESS = ("--vehicles-per-process", "4")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
-
-
-def gcs_command(*args: str) -> list[str]:
-    """`python -m gcs ARGS`, registering `mission run` and `speed` if the CLI does not yet."""
-    if "gcs.cmd_run" in gcs.cmd_mission.SUBCOMMANDS and "gcs.cmd_speed" in gcs.cli.GROUPS:
-        return [sys.executable, "-m", "gcs", *args]
-    launch = (
-        "import sys, gcs.cmd_mission as m, gcs.cli as c;"
-        "m.SUBCOMMANDS = tuple(dict.fromkeys((*m.SUBCOMMANDS, 'gcs.cmd_run')));"
-        "c.GROUPS = tuple(dict.fromkeys((*c.GROUPS, 'gcs.cmd_speed')));"
-        "sys.exit(c.main(sys.argv[1:]))"
-    )
-    return [sys.executable, "-c", launch, *args]
-
-
-def environment() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-    return env
-
-
-def read_log(path: Path) -> dict[str, list[tuple[int, dict]]]:
-    """JSON topics of a recording: topic -> [(log_time, message)]."""
-    topics: dict[str, list[tuple[int, dict]]] = {}
-    with open(path, "rb") as handle:
-        for _, channel, message in make_reader(handle).iter_messages():
-            if channel.message_encoding == "json":
-                topics.setdefault(channel.topic, []).append(
-                    (message.log_time, json.loads(message.data))
-                )
-    return topics
 
 
 def test_the_small_mission_flies_end_to_end(tmp_path: Path):
@@ -160,42 +126,11 @@ def test_the_small_mission_flies_end_to_end(tmp_path: Path):
     assert times == sorted(times)
 
 
-def wait_line(stream, selector, needle: str, deadline: float, seen: list[str]) -> str:
-    """Read `stream` line by line until one contains `needle` (or fail at the deadline)."""
-    while time.monotonic() < deadline:
-        if not selector.select(max(0.0, deadline - time.monotonic())):
-            continue
-        line = stream.readline()
-        if not line:
-            break
-        seen.append(line)
-        if needle in line:
-            return line
-    raise AssertionError(f"never saw {needle!r}; last lines: {''.join(seen[-20:])}")
-
-
-def children_running(pid: int, needle: str) -> list[int]:
-    """Processes whose parent is `pid` and whose command line contains `needle` (Linux)."""
-    found = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            status = (entry / "status").read_text()
-            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode()
-        except OSError:
-            continue
-        parent = next(int(x.split()[1]) for x in status.splitlines() if x.startswith("PPid:"))
-        if parent == pid and needle in cmdline:
-            found.append(int(entry.name))
-    return found
-
-
 def test_losing_a_vehicle_freezes_reports_and_lands_the_others(tmp_path: Path):
     log = tmp_path / "kill.mcap"
     gcs = subprocess.Popen(
         gcs_command(
-            "-v", "mission", "run", str(MISSION), "--speedup", "10", *PER_PROCESS, "--json",
+            "-v", "mission", "run", str(MISSION), "--speedup", SPEEDUP, *PER_PROCESS, "--json",
             "--log", str(log), "--link-wait", "3",
         ),
         stdout=subprocess.PIPE,
@@ -260,7 +195,7 @@ def test_ctrl_c_once_freezes_twice_lands_everyone_where_they_are(tmp_path: Path)
     log = tmp_path / "interrupted.mcap"
     gcs = subprocess.Popen(
         gcs_command(
-            "-v", "mission", "run", str(MISSION), "--speedup", "10", *PER_PROCESS, "--json",
+            "-v", "mission", "run", str(MISSION), "--speedup", SPEEDUP, *PER_PROCESS, "--json",
             "--log", str(log),
         ),
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,

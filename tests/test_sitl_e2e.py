@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 import yaml
 
-from gcs import cmd_mission
 from gcs.geodesy import geodetic_to_enu
 from gcs.mission import load_mission
 from gcs.sitl import launch_plan, plan_for_launch
@@ -40,10 +39,8 @@ SPEEDUP = {"ardupilot": 10.0, "px4": 10.0}  # PX4's offboard-loss timeout stays 
 
 
 @pytest.fixture
-def run_command(gcs_main, monkeypatch):
-    """`gcs ...` in-process with `gcs mission run` registered."""
-    if "gcs.cmd_run" not in cmd_mission.SUBCOMMANDS:
-        monkeypatch.setattr(cmd_mission, "SUBCOMMANDS", (*cmd_mission.SUBCOMMANDS, "gcs.cmd_run"))
+def run_command(gcs_main):
+    """`gcs ...` in this process (conftest's `gcs_main`)."""
     return gcs_main
 
 

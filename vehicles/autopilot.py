@@ -14,7 +14,8 @@ armed and landed; landing ends in an automatic disarm; position targets outside 
 ignored silently. Differences from ArduCopter, on purpose: refusals always carry a STATUSTEXT
 reason; in GUIDED a stream of ``SET_POSITION_TARGET_*`` that stops for ``setpoint_timeout_s``
 makes the vehicle brake and hold (PX4's offboard-loss behaviour; it stays in GUIDED and follows
-again when setpoints resume); losing the GCS heartbeat makes it hold (BRAKE) and then LAND.
+again when setpoints resume); losing the GCS (no valid message from its system id) makes
+it hold (BRAKE), then LAND.
 
 Timeouts count simulated time and never fire before a wall-clock floor (``wall_floor_s``), so a
 busy machine at a high speedup does not trip them. See :mod:`vehicles.fleet_speed` for the
@@ -198,7 +199,6 @@ class Autopilot:
         self._previous_attitude: tuple[float, float, float, float] | None = None
         self.idle_on_ground()
         self._handlers: dict[str, Callable[[mavlink.MAVLink_message, Stamp], None]] = {
-            "HEARTBEAT": self._on_heartbeat,
             "SET_MODE": self._on_set_mode,
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
@@ -617,6 +617,10 @@ class Autopilot:
     # ------------------------------------------------------------------ input ----------
     def handle(self, message: mavlink.MAVLink_message, stamp: Stamp) -> None:
         """React to one decoded message (already known to be valid MAVLink)."""
+        if message.get_srcSystem() == self.config.failsafe.gcs_system and (
+            self._gcs_last is not None or message.get_type() == "HEARTBEAT"
+        ):
+            self._gcs_alive(stamp)
         handler = self._handlers.get(message.get_type())
         if handler is None:
             return
@@ -630,9 +634,10 @@ class Autopilot:
             return
         handler(message, stamp)
 
-    def _on_heartbeat(self, msg: mavlink.MAVLink_message, stamp: Stamp) -> None:
-        if msg.get_srcSystem() != self.config.failsafe.gcs_system:
-            return
+    def _gcs_alive(self, stamp: Stamp) -> None:
+        """The GCS failsafe is armed by the GCS's first HEARTBEAT; from then on any valid
+        message from its system id proves it alive (CONTRACTS.md, MAVLink), so that on a lossy
+        link its 10 Hz setpoints keep the failsafe off when five 1 Hz heartbeats are lost."""
         self._gcs_last = stamp
         if self.gcs_failsafe is not None:
             self.gcs_failsafe = None

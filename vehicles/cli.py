@@ -21,6 +21,8 @@ from vehicles.dynamics import Airframe, Disturbances, DynamicsConfig
 from vehicles.fleet_speed import LeaderRequest
 from vehicles.frames import GeodeticOrigin
 from vehicles.link import PortInUseError
+from vehicles.orphan import OrphanExit
+from vehicles.signing import KeyFileError, read_key_file
 from vehicles.sim import DEFAULT_ORIGIN, SimConfig, Simulation, VehicleSpec
 from vehicles.telemetry import TelemetryRates
 
@@ -167,6 +169,13 @@ def _positions_file(path: str) -> list[tuple[float, float, float]]:
     if not isinstance(data, list):
         raise InputError(f"{path}: expected a JSON list of [x, y] or [x, y, z] positions")
     return _position_list(path, data)
+
+
+def _signing_key(path: str) -> bytes:
+    try:
+        return read_key_file(path)
+    except KeyFileError as exc:
+        raise InputError(f"--signing-key-file: {exc}") from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -340,6 +349,24 @@ def build_parser() -> argparse.ArgumentParser:
         help="dynamics rate in simulated Hz (100)",
     )
     add("--log-level", choices=("debug", "info", "warning", "error"), default="warning")
+    add(
+        "--signing-key-file",
+        type=_signing_key,
+        dest="signing_key",
+        metavar="PATH",
+        help="MAVLink 2 signing: owner-only file whose first line is the passphrase (key = its "
+        "SHA-256, as MAVProxy's `signing setup`); without it SETUP_SIGNING sets a key while "
+        "disarmed",
+    )
+    add(
+        "--exit-when-orphaned",
+        nargs="?",
+        const=0,
+        type=_integer("--exit-when-orphaned", 0, 2**22),
+        metavar="PID",
+        help="exit once the parent process (PID, default: the one at start) is gone and every "
+        "vehicle is disarmed on the ground",
+    )
     return parser
 
 
@@ -424,6 +451,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         autopilot=autopilot,
         leader_sysid=leader if args.leader_requests else None,
         leader_requests=args.leader_requests,
+        signing_key=args.signing_key,
     )
 
 
@@ -464,7 +492,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         flush=True,
     )
     try:
-        stats = simulation.run(lambda: stop)
+        orphan = None
+        if args.exit_when_orphaned is not None:
+            orphan = OrphanExit(simulation.autopilots, args.exit_when_orphaned or None)
+        stats = simulation.run(lambda: stop or (orphan is not None and orphan()))
     finally:
         simulation.close()
     print(

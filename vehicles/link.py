@@ -7,8 +7,8 @@ out together, several MAVLink frames per datagram. Every received datagram is pa
 (a truncated datagram never corrupts the next one); anything that is not valid MAVLink is
 counted and dropped.
 
-:func:`make_codec` is the one place where a vehicle's pymavlink codec is created: MAVLink 2
-signing (``codec.signing``) gets its key there.
+:func:`make_codec` is the one place where a vehicle's pymavlink codec is created; MAVLink 2
+signing is ``vehicles.signing`` (``VehicleLink.signing``).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from vehicles.autopilot import AUTOPILOT_COMPONENT
+from vehicles.signing import VehicleSigning
 
 log = logging.getLogger(__name__)
 
@@ -32,7 +33,6 @@ MAX_DATAGRAM = 65535
 RECEIVE_BUFFER_BYTES = 1 << 20
 MAX_DATAGRAMS_PER_POLL = 256
 MAX_BATCH_BYTES = 1400  # frames per datagram: stay below a typical path MTU
-SIGNING_EPOCH = 1420070400  # MAVLink 2 signing timestamps count from 2015-01-01
 # kernel arrival timestamps: a setpoint is stamped when it arrived, not when a busy process
 # got round to reading it (at a 20x speedup, 10 ms late would be 2 m at 10 m/s)
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35 if sys.platform == "linux" else None)
@@ -47,17 +47,11 @@ class PortInUseError(OSError):
         self.host, self.port, self.sysid = host, port, sysid
 
 
-def make_codec(sysid: int, signing_key: bytes | None = None) -> mavlink.MAVLink:
-    """A MAVLink 2 codec for system ``sysid``, component 1 (autopilot); signed if a key is given."""
+def make_codec(sysid: int) -> mavlink.MAVLink:
+    """A MAVLink 2 codec for system ``sysid``, component 1 (autopilot), unsigned (a link signs
+    it with ``vehicles.signing.VehicleSigning``)."""
     codec = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=AUTOPILOT_COMPONENT)
     codec.robust_parsing = True
-    if signing_key is not None:  # as mavutil's setup_signing: unsigned input is then refused
-        codec.signing.secret_key = signing_key
-        codec.signing.sign_outgoing = True
-        codec.signing.link_id = 0
-        codec.signing.timestamp = int(
-            max(time.time() - SIGNING_EPOCH, 0.0) * 100_000
-        )  # 10 us units
     return codec
 
 
@@ -87,7 +81,10 @@ class VehicleLink:
         self.out = out
         self.peer: Address | None = None
         self.stats = LinkStats()
-        self.codec = make_codec(sysid, signing_key)
+        self.codec = make_codec(sysid)
+        # MAVLink 2 signing: with a key (or once SETUP_SIGNING gave one) unsigned, wrongly
+        # signed and replayed input is refused before it is parsed into a message
+        self.signing = VehicleSigning(self.codec, signing_key)
         self.codec.file = self  # pymavlink's send() writes the packed frame here
         self._pending: list[bytes] = []
         self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

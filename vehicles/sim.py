@@ -25,6 +25,7 @@ from vehicles.dynamics import DynamicsConfig, FleetDynamics
 from vehicles.fleet_speed import LeaderRequest
 from vehicles.frames import GeodeticOrigin
 from vehicles.link import Address, VehicleLink
+from vehicles.signing import deliver_setup_signing, report_refusals
 from vehicles.telemetry import NEEDS_ESTIMATED_GEODETIC, NEEDS_TRUE_GEODETIC, FleetSnapshot
 
 log = logging.getLogger(__name__)
@@ -211,6 +212,7 @@ class Simulation:
         for k, (autopilot, link) in enumerate(zip(self.autopilots, self.links, strict=True)):
             autopilot.comm_errors = link.stats.bad_datagrams
             autopilot.update(stamp)
+            report_refusals(link, autopilot, stamp)  # refused (unsigned...) frames: STATUSTEXT
             due = autopilot.telemetry.due(stamp.sim_s)
             due_lists.append(due)
             if due:
@@ -237,7 +239,10 @@ class Simulation:
 
     def _deliver(self, arrival: _Arrival) -> None:
         autopilot = self.autopilots[arrival.vehicle]
+        link = self.links[arrival.vehicle]
         try:
+            if deliver_setup_signing(link, autopilot, arrival.message, arrival.stamp):
+                return  # the key is the link's business (vehicles.signing)
             autopilot.handle(arrival.message, arrival.stamp)
         except Exception:  # a message must never take the vehicle down
             log.exception(

@@ -690,6 +690,20 @@ class Driver(ABC):
             text,
         )
 
+    def refuse_position(self, what: str, now: float) -> None:
+        """A position that is not a position (NaN, infinite, off the globe): the sample is
+        refused, the UAV is faulty (the ground station cannot watch it): it is told to land
+        where it is (no position needed) and the driver fails (the runtime then lands
+        everyone). Its last valid true position is forgotten so that no stale sample is used."""
+        if self.phase == Phase.FAILED:
+            return
+        self.emit("invalid_position", f"{what} is not valid: sample refused", now,
+                  mavlink.MAV_SEVERITY_ERROR)  # fmt: skip
+        self.telemetry.true_position_enu = None
+        if self.phase in AIRBORNE_PHASES:
+            self.send_command(replace(self.landing_command(), key="mode"), now)
+        self.fail(f"reports an invalid {what}", now)
+
     def fail(self, reason: str, now: float) -> None:
         """Give up on this UAV with a reason (a pending ARM is not sent again)."""
         self.commands.discard("arm")
@@ -915,8 +929,15 @@ class Driver(ABC):
 
     # ------------------------------------------------------------------ command results
     def _on_takeoff_result(self, outcome: Outcome, now: float) -> None:
-        if not outcome.accepted and self.phase == Phase.TAKING_OFF:
-            self.fail(f"take-off refused: {outcome.describe()}", now)
+        if outcome.accepted or self.phase != Phase.TAKING_OFF:
+            return
+        if outcome.attempts > 1 or outcome.result is None:
+            # on a lossy link an earlier try may have been obeyed and its ACK lost (a repeat is
+            # then refused: "already flying"): the climb decides, within the take-off timeout
+            self.emit("command", f"take-off: {outcome.describe()} after {outcome.attempts} "
+                      "tries: waiting for the climb", now, mavlink.MAV_SEVERITY_WARNING)  # fmt: skip
+            return
+        self.fail(f"take-off refused: {outcome.describe()}", now)
 
     def _on_vehicle_text(self, severity: int, text: str, now: float) -> None:
         self.emit("statustext", text, now, severity)
@@ -950,6 +971,9 @@ class Driver(ABC):
     def _on_global_position(self, msg, now: float) -> None:
         if msg.lat == 0 and msg.lon == 0:
             return  # ArduPilot streams zeros until it has a position
+        if abs(msg.lat) > 900_000_000 or abs(msg.lon) > 1_800_000_000:
+            self.refuse_position("reported position (GLOBAL_POSITION_INT)", now)
+            return
         t = self.telemetry
         t.position_enu = geodetic_to_enu(
             msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, self.spec.origin
@@ -963,6 +987,10 @@ class Driver(ABC):
         """SIM_STATE (simulators): the true position, what the run's metrics measure."""
         lat = msg.lat_int * 1e-7 if msg.lat_int else msg.lat
         lon = msg.lon_int * 1e-7 if msg.lon_int else msg.lon
+        values = np.array([lat, lon, msg.alt, msg.ve, msg.vn, msg.vd], float)
+        if not np.isfinite(values).all() or abs(lat) > 90.0 or abs(lon) > 180.0:
+            self.refuse_position("true position (SIM_STATE)", now)
+            return
         t = self.telemetry
         t.true_position_enu = geodetic_to_enu(lat, lon, msg.alt, self.spec.origin)
         t.true_velocity_enu = np.array([msg.ve, msg.vn, -msg.vd], float)

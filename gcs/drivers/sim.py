@@ -25,6 +25,7 @@ import numpy as np
 from gcs.drivers.base import CommandSpec, Driver, Fleet, FleetProblem, FlightMode
 from gcs.geodesy import Origin
 from gcs.link import mavutil
+from gcs.radio import MediumProcess, MediumSetup
 
 log = logging.getLogger(__name__)
 mavlink = mavutil.mavlink
@@ -108,6 +109,7 @@ class SimVehicleSetup:
     leaders: dict[int, list[tuple[float, float]]] = field(default_factory=dict)
     extra_args: tuple[str, ...] = ()
     log_dir: Path | None = None  # where each process's stderr goes (None: discarded)
+    radio: MediumSetup | None = None  # links through the radio medium (gcs.radio); None: direct
 
     def groups(self) -> list[list[int]]:
         """UAV indexes (0-based) per process: runs of consecutive UAVs (a process numbers its
@@ -140,6 +142,7 @@ class SimFleet(Fleet):
         self.groups: list[tuple[int, ...]] = []  # UAV ids (1-based) of each process
         self.ports: dict[int, int] = {}  # UAV id -> UDP port
         self._reported: set[int] = set()
+        self.medium: MediumProcess | None = None
 
     def start(self) -> list[str]:
         for group in self.setup.groups():
@@ -148,7 +151,27 @@ class SimFleet(Fleet):
                 self.ports[k + 1] = port + i
             self.processes.append(self._spawn(group, port))
             self.groups.append(tuple(k + 1 for k in group))
+        if self.setup.radio is not None:  # every link goes through the radio medium
+            self.medium = self._start_medium()
+            return [f"udpout:{self.host}:{self.medium.port(k)}" for k in range(len(self.ports))]
         return [f"udpout:{self.host}:{self.ports[uav]}" for uav in sorted(self.ports)]
+
+    def _start_medium(self) -> MediumProcess:
+        s = self.setup
+        return MediumProcess(
+            s.radio,
+            listen_port=self._free_block(len(self.ports)),
+            vehicle_ports=[self.ports[uav] for uav in sorted(self.ports)],
+            starts=s.homes,
+            sysid_base=s.sysid_base,
+            speedup=s.speedup,
+            origin=s.origin,
+            stderr_path=s.log_dir / "medium.log" if s.log_dir is not None else None,
+        )
+
+    def radio_reports(self) -> list[dict]:
+        """The radio medium's reports since the last call (none without a medium)."""
+        return self.medium.reports() if self.medium is not None else []
 
     def vehicle_command(self, group: list[int], port: int) -> list[str]:
         """The `vehicles sim` command line for UAVs `group` (0-based, consecutive ports)."""
@@ -199,10 +222,17 @@ class SimFleet(Fleet):
                 who = ", ".join(map(str, uavs))
                 text = f"vehicle process of UAV {who} (pid {process.pid}) exited with {code}"
                 problems.append(FleetProblem(text, uavs))
+        code = self.medium.exit_code() if self.medium is not None else None
+        if code is not None and -1 not in self._reported:
+            self._reported.add(-1)
+            text = f"radio medium (pid {self.medium.process.pid}) exited with {code}"
+            problems.append(FleetProblem(text, tuple(sorted(self.ports))))
         return problems
 
     def close(self) -> None:
         """SIGTERM every process, then SIGKILL what is still alive after a grace period."""
+        if self.medium is not None:
+            self.medium.close()
         for process in self.processes:
             if process.poll() is None:
                 process.send_signal(signal.SIGTERM)

@@ -1,0 +1,176 @@
+"""The ground station's side of the emulated radio medium (sim backend, `radio.enabled`).
+
+`medium_setup(mission)` says what the medium needs from the mission (base stations A, B and
+the extra ones, radio range, the `radio:` section, ground users, seed); `MediumProcess` starts
+`python -m vehicles.medium_cli` between the GCS and the vehicle processes, always stops it,
+and collects its periodic reports (JSON datagrams on a loopback UDP socket: never blocking,
+whoever reads them or not). The last report is the run JSON's `radio` object (CONTRACTS.md).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+#: The run JSON's `radio` keys (CONTRACTS.md), plus our extras.
+RUN_JSON_KEYS = ("connected_fraction", "packets", "delay_ms", "ground_users", "hops", "per_uav")
+MAX_REPORT_BYTES = 65535
+MAX_REPORTS_PER_POLL = 100
+
+
+@dataclass(frozen=True)
+class MediumSetup:
+    """The medium of one run."""
+
+    stations: tuple[tuple[float, float], ...]
+    range_m: float
+    hop_latency_ms: float = 2.0
+    jitter_ms: float = 1.0
+    loss: float = 0.0
+    seed: int = 0
+    ground_users: tuple[tuple[float, float, float], ...] = ()  # x, y, rate bit/s
+    report_period_s: float = 0.5  # simulated
+
+
+def medium_setup(mission) -> MediumSetup | None:
+    """The medium of `mission` (None when `radio.enabled` is false)."""
+    radio = mission.radio
+    if not radio.enabled:
+        return None
+    stations = [mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations]
+    return MediumSetup(
+        stations=tuple((float(x), float(y)) for x, y in stations),
+        range_m=float(mission.radio_range),
+        hop_latency_ms=radio.hop_latency_ms,
+        jitter_ms=radio.jitter_ms,
+        loss=radio.loss,
+        seed=mission.sim.seed,
+        ground_users=tuple((u.x, u.y, u.rate_bps) for u in mission.ground_users),
+    )
+
+
+def run_json_radio(report: dict | None) -> dict | None:
+    """The run JSON's `radio` object from the medium's last report."""
+    if report is None:
+        return None
+    return {key: report[key] for key in RUN_JSON_KEYS if key in report}
+
+
+def _points(points) -> str:
+    return ";".join(",".join(f"{v:.4f}" for v in point) for point in points)
+
+
+class MediumProcess:
+    """The medium between the GCS and the vehicles: UAV k is reached at `port(k)`."""
+
+    host = "127.0.0.1"
+
+    def __init__(
+        self,
+        setup: MediumSetup,
+        *,
+        listen_port: int,
+        vehicle_ports: list[int],
+        starts: np.ndarray,
+        sysid_base: int,
+        speedup: float,
+        origin,
+        extra_args: tuple[str, ...] = (),
+        stderr_path: Path | None = None,
+    ) -> None:
+        self.listen_port = listen_port
+        self._reports = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._reports.bind((self.host, 0))
+        self._reports.setblocking(False)
+        report_port = self._reports.getsockname()[1]
+        cmd = [
+            sys.executable, "-m", "vehicles.medium_cli",
+            "--count", str(len(vehicle_ports)),
+            "--base-port", str(listen_port),
+            "--vehicle-ports", ",".join(map(str, vehicle_ports)),
+            "--sysid-base", str(sysid_base),
+            f"--positions={_points(np.asarray(starts)[:, :2])}",
+            f"--stations={_points(setup.stations)}",
+            "--range", f"{setup.range_m!r}",
+            "--hop-latency-ms", f"{setup.hop_latency_ms!r}",
+            "--jitter-ms", f"{setup.jitter_ms!r}",
+            "--loss", f"{setup.loss!r}",
+            "--seed", str(setup.seed),
+            "--speedup", f"{speedup!r}",
+            f"--home={origin.lat:.9f},{origin.lon:.9f},{origin.alt:.3f}",
+            f"--ground-users={_points(setup.ground_users)}",
+            "--report", f"udp:{self.host}:{report_port}",
+            "--report-period", f"{setup.report_period_s!r}",
+            *extra_args,
+        ]  # fmt: skip
+        self.command = cmd
+        log.info("starting %s", " ".join(cmd))
+        root = str(Path(__file__).resolve().parents[1])  # the tree holding `vehicles`
+        path = os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))
+        stderr = open(stderr_path, "wb") if stderr_path else subprocess.DEVNULL  # noqa: SIM115
+        try:
+            self.process = subprocess.Popen(
+                cmd,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=stderr,
+                env={**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": path},
+                start_new_session=True,  # Ctrl-C in the terminal reaches the GCS only
+            )
+        except OSError:
+            self._reports.close()
+            raise
+        finally:
+            if stderr is not subprocess.DEVNULL:
+                stderr.close()
+        self.last_report: dict | None = None
+
+    def port(self, k: int) -> int:
+        return self.listen_port + k
+
+    def reports(self) -> list[dict]:
+        """The reports that arrived since the last call (oldest first)."""
+        out = []
+        for _ in range(MAX_REPORTS_PER_POLL):
+            try:
+                data = self._reports.recv(MAX_REPORT_BYTES)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as exc:
+                log.debug("medium report: %s", exc)
+                break
+            try:
+                report = json.loads(data)
+            except ValueError:
+                continue
+            if isinstance(report, dict):
+                out.append(report)
+        if out:
+            self.last_report = out[-1]
+        return out
+
+    def exit_code(self) -> int | None:
+        return self.process.poll()
+
+    def close(self) -> None:
+        """Stop the process (SIGTERM, then SIGKILL), keep its last report."""
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+        try:
+            self.process.wait(timeout=3.0)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait(timeout=3.0)
+        self.reports()
+        self._reports.close()

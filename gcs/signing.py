@@ -1,0 +1,413 @@
+"""MAVLink 2 signing of the ground station's links, and the fleet key (pymavlink's signing).
+
+The fleet key. A key file is a text file holding a passphrase on its first line; the 32-byte
+signing key is the SHA-256 of that passphrase, exactly what MAVProxy's `signing setup
+PASSPHRASE` derives, so the same file provisions ArduPilot or PX4 SITL through MAVProxy. `gcs`
+creates a missing key file (`signing.key_file`, relative to the mission file) with owner-only
+permissions and 64 random hex digits (256 bits); a key file that group or others may read, an
+empty or short passphrase, or a missing folder is bad input (exit 2). Without
+`signing.key_file`, the simulated fleet gets a fresh key for the run (`EphemeralKey`), written
+only to an owner-only file in a private temporary folder that the vehicle processes read at
+start and that is removed at the end of the run.
+
+The links. `FleetSigning.apply(link)` calls mavutil's `setup_signing` on each link (sign
+everything sent, no unsigned input accepted) and makes every link of the fleet share ONE
+signing state: one timestamp for the whole fleet, that never falls behind the wall clock
+(`ClockedSigning`), so a frame captured on the link of one UAV and replayed to another, or
+captured earlier, is older than what that UAV already heard. Incoming frames are
+refused when unsigned, wrongly signed, or replayed (a timestamp not newer than the last one of
+its stream (link id, system, component), or a new stream more than a minute old). Refused
+frames never reach a driver and never count as "link alive" (the `Link` sees them as bad data).
+
+One hardening over pymavlink 2.4.50: its `check_signature` records a stream's timestamp BEFORE
+it compares the signature (history: ArduPilot/pymavlink#961), so one forged frame with a future
+timestamp would make every later genuine frame of that stream look like a replay (the MAVLink
+C library checks the signature first). `SignatureCheck` compares the signature first and only
+then lets pymavlink check and record the timestamp.
+
+Refusals are counted per UAV and kind (`unsigned`, `bad_signature`, `replayed`) and written to
+the recording's `/events` by `RejectionLog` (the first at once, then at most one summary per
+UAV per second, and the remainder at the end of the run).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import logging
+import os
+import secrets
+import shutil
+import stat
+import tempfile
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from gcs.errors import InputError
+from gcs.link import Link, mavutil
+
+log = logging.getLogger(__name__)
+mavlink = mavutil.mavlink
+
+#: Link id of the ground station's signed stream (MAVLink 2 signing).
+GCS_LINK_ID = 0
+#: A passphrase shorter than this is refused (the key is only as strong as the passphrase).
+MIN_PASSPHRASE_CHARS = 16
+#: Kinds of refused frames.
+REJECTION_KINDS = ("unsigned", "bad_signature", "replayed")
+#: A UAV's refusals are summarised in the log at most this often (wall seconds).
+REPORT_PERIOD_S = 1.0
+_SIGNATURE_BYTES = 6
+SIGNING_EPOCH = 1420070400  # MAVLink 2 signing timestamps count 10 us from 2015-01-01
+
+#: Called for each refused frame: (kind, source system or None, message id or None).
+OnReject = Callable[[str, int | None, int | None], None]
+
+
+def key_from_passphrase(passphrase: str) -> bytes:
+    """The 32-byte signing key of a passphrase: SHA-256, as MAVProxy's `signing setup`."""
+    return hashlib.sha256(passphrase.encode()).digest()
+
+
+@dataclass(frozen=True)
+class FleetKey:
+    """The fleet's signing key and where it lives (`path`; `created` if this run made it)."""
+
+    key: bytes = field(repr=False)
+    path: Path
+    created: bool = False
+    ephemeral: bool = False
+
+
+def load_or_create_key(
+    path: Path, source: Path | None = None, key_path: str = "signing.key_file"
+) -> FleetKey:
+    """Read the key file at `path`, creating it (owner-only, 256 random bits) if missing.
+
+    Bad input (`InputError`, exit 2): a missing folder, a path that is not a regular file, a file
+    group or others may access, an unreadable file, an empty or short passphrase.
+    """
+    path = Path(path)
+    created = False
+    if not path.exists():
+        if not path.parent.is_dir():
+            raise InputError(source, key_path, f"a file in an existing folder, got {path}")
+        try:
+            descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        except OSError as error:
+            raise InputError(
+                source, key_path, f"a writable key file ({error.strerror}: {path})"
+            ) from None
+        with os.fdopen(descriptor, "w") as handle:
+            handle.write(secrets.token_hex(32) + "\n")
+        created = True
+        log.info("created the fleet key file %s", path)
+    try:
+        info = path.stat()
+    except OSError as error:
+        raise InputError(
+            None, key_path, f"a readable key file ({error.strerror}: {path})"
+        ) from None
+    if not stat.S_ISREG(info.st_mode):
+        raise InputError(source, key_path, f"a regular file, got {path}")
+    if info.st_mode & 0o077:
+        raise InputError(
+            source,
+            key_path,
+            f"a key file only its owner can access (chmod 600 {path}), "
+            f"got mode {stat.S_IMODE(info.st_mode):03o}",
+        )
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        raise InputError(source, key_path, f"a readable UTF-8 key file ({path})") from None
+    lines = text.splitlines()
+    passphrase = lines[0].strip() if lines else ""
+    if len(passphrase) < MIN_PASSPHRASE_CHARS:
+        raise InputError(
+            source,
+            key_path,
+            f"a passphrase of at least {MIN_PASSPHRASE_CHARS} characters on the first line of "
+            f"{path} (delete the file to get a random one)",
+        )
+    return FleetKey(key_from_passphrase(passphrase), path.resolve(), created=created)
+
+
+class EphemeralKey:
+    """A fresh key for one run of the simulated fleet, in an owner-only file of a private
+    temporary folder (the vehicles read it at start); `close()` removes both."""
+
+    def __init__(self) -> None:
+        self.folder = Path(tempfile.mkdtemp(prefix="fleetline-key-"))  # mode 0700
+        path = self.folder / "fleet.key"
+        descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        passphrase = secrets.token_hex(32)
+        with os.fdopen(descriptor, "w") as handle:
+            handle.write(passphrase + "\n")
+        self.fleet_key = FleetKey(key_from_passphrase(passphrase), path, True, ephemeral=True)
+
+    def close(self) -> None:
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def _message_id(msgbuf: bytes) -> int | None:
+    """Message id from a MAVLink 2 header (bytes 7-9), None if it is not one."""
+    if len(msgbuf) >= 10 and msgbuf[0] == mavlink.PROTOCOL_MARKER_V2:
+        return msgbuf[7] | msgbuf[8] << 8 | msgbuf[9] << 16
+    return None
+
+
+def clock_timestamp() -> int:
+    """The wall clock as a MAVLink 2 signing timestamp (10 us units since 2015-01-01)."""
+    return int(max(time.time() - SIGNING_EPOCH, 0.0) * 100_000)
+
+
+class ClockedSigning(mavlink.MAVLinkSigning):
+    """pymavlink's signing state, with a timestamp that never falls behind the wall clock.
+
+    pymavlink starts the timestamp at the clock and adds 1 (10 us) per frame sent, so a link
+    sending a few hundred frames a second signs with timestamps that fall further behind the
+    clock every second; then a frame recorded earlier by someone holding the key, or any frame
+    dated by the clock, would be newer than everything genuine. MAVLink 2 asks a system with a
+    clock to use it: the timestamp read for each frame is max(the counter, the clock).
+    """
+
+    def __init__(self, state: mavlink.MAVLinkSigning) -> None:
+        self._timestamp = 0
+        super().__init__()
+        self.__dict__.update({k: v for k, v in vars(state).items() if k != "timestamp"})
+        self.timestamp = state.timestamp
+
+    @property
+    def timestamp(self) -> int:
+        return max(self._timestamp, clock_timestamp())
+
+    @timestamp.setter
+    def timestamp(self, value: int) -> None:
+        self._timestamp = int(value)
+
+
+class SignatureCheck:
+    """Installed on one pymavlink `MAVLink` codec: the signature is compared before pymavlink
+    checks and records the stream's timestamp, and every refusal is reported to `on_reject`.
+
+    pymavlink calls `allow_unsigned_callback` for unsigned frames and again after a failed
+    signature check; `unsigned` tells the two apart and never accepts.
+    """
+
+    def __init__(self, mav, on_reject: OnReject) -> None:
+        self.mav = mav
+        self.on_reject = on_reject
+        self._pymavlink_check = mav.check_signature  # the class's method, bound
+        self._failed = False
+        mav.check_signature = self.check  # the instance attribute shadows the method
+
+    def check(self, msgbuf: bytearray, source_system: int, source_component: int) -> bool:
+        key = self.mav.signing.secret_key
+        digest = hashlib.sha256(key + bytes(msgbuf[:-_SIGNATURE_BYTES])).digest()
+        if not hmac.compare_digest(digest[:_SIGNATURE_BYTES], bytes(msgbuf[-_SIGNATURE_BYTES:])):
+            self._refuse("bad_signature", source_system, _message_id(msgbuf))
+            return False
+        if self._pymavlink_check(msgbuf, source_system, source_component):
+            return True
+        self._refuse("replayed", source_system, _message_id(msgbuf))
+        return False
+
+    def unsigned(self, mav, message_id: int) -> bool:
+        if self._failed:  # pymavlink asks again after a failed check: already counted
+            self._failed = False
+            return False
+        self.on_reject("unsigned", None, message_id)
+        return False
+
+    def _refuse(self, kind: str, source_system: int, message_id: int | None) -> None:
+        self._failed = True
+        self.on_reject(kind, source_system, message_id)
+
+
+class FleetSigning:
+    """Signs the links of one fleet with one shared signing state; counts the refusals."""
+
+    def __init__(
+        self, key: bytes, on_reject: Callable[[int, str, int | None], None] | None = None
+    ) -> None:
+        if len(key) != 32:
+            raise ValueError("a MAVLink 2 signing key is 32 bytes")
+        self.key = key
+        self.on_reject = on_reject
+        self.rejected: dict[int, Counter] = {}  # UAV id -> Counter(kind)
+        self._state = None  # the shared pymavlink MAVLinkSigning
+        self._checks: dict[int, SignatureCheck] = {}  # id(codec) -> its check
+
+    def apply(self, link: Link, uav: int) -> None:
+        """Sign `link` (UAV `uav`): pymavlink's `setup_signing`, the shared state, the check."""
+        link.setup_signing(
+            self.key,
+            sign_outgoing=True,
+            allow_unsigned_callback=self._unsigned,
+            link_id=GCS_LINK_ID,
+        )
+        if self._state is None:
+            self._state = ClockedSigning(link.mav.signing)
+        link.mav.signing = self._state
+        self.rejected.setdefault(uav, Counter())
+
+        def refused(kind: str, source: int | None, message_id: int | None, uav=uav) -> None:
+            self.rejected[uav][kind] += 1
+            if self.on_reject is not None:
+                self.on_reject(uav, kind, message_id)
+
+        self._checks[id(link.mav)] = SignatureCheck(link.mav, refused)
+
+    def _unsigned(self, mav, message_id: int) -> bool:
+        check = self._checks.get(id(mav))
+        return False if check is None else check.unsigned(mav, message_id)
+
+    def totals(self) -> dict[str, dict[str, int]]:
+        """Refused frames per UAV and kind (run JSON)."""
+        return {
+            str(uav): {kind: int(counts[kind]) for kind in REJECTION_KINDS}
+            for uav, counts in sorted(self.rejected.items())
+        }
+
+
+def message_name(message_id: int | None) -> str:
+    """A message id's name (`#id` when unknown)."""
+    if message_id is None:
+        return "?"
+    kind = mavlink.mavlink_map.get(message_id)
+    return kind.msgname if kind is not None else f"#{message_id}"
+
+
+class RejectionLog:
+    """Writes refused frames to the recording's `/events`, summarised per UAV.
+
+    `event(level, text, wall)` is the recorder's; `monotonic` the runtime's wall clock.
+    """
+
+    def __init__(
+        self,
+        event: Callable[..., None],
+        monotonic: Callable[[], float] = time.monotonic,
+        period_s: float = REPORT_PERIOD_S,
+    ) -> None:
+        self._event = event
+        self._monotonic = monotonic
+        self.period_s = period_s
+        self._pending: dict[int, Counter] = {}
+        self._types: dict[int, Counter] = {}
+        self._last: dict[int, float] = {}
+
+    def __call__(self, uav: int, kind: str, message_id: int | None) -> None:
+        self._pending.setdefault(uav, Counter())[kind] += 1
+        self._types.setdefault(uav, Counter())[message_name(message_id)] += 1
+        now = self._monotonic()
+        last = self._last.get(uav)
+        if last is None or now - last >= self.period_s:
+            self._write(uav, now)
+
+    def flush(self) -> None:
+        """Write what is not yet reported (end of the run)."""
+        now = self._monotonic()
+        for uav in sorted(self._pending):
+            self._write(uav, now)
+
+    def _write(self, uav: int, now: float) -> None:
+        counts = self._pending.pop(uav, None)
+        types = self._types.pop(uav, Counter())
+        if not counts:
+            return
+        self._last[uav] = now
+        what = ", ".join(f"{counts[k]} {k.replace('_', ' ')}" for k in REJECTION_KINDS if counts[k])
+        names = ", ".join(name for name, _ in types.most_common(4))
+        text = f"UAV {uav} link: refused {what} frame(s) ({names})"
+        self._event("warning", text, now, name="signing")
+        log.warning("%s", text)
+
+
+class RunSigning:
+    """How one `gcs mission run` signs its MAVLink (built before anything starts: a bad key
+    file is bad input).
+
+    * `--insecure`: nothing is signed (said loudly: a console line and a log event);
+    * `signing.key_file` set: that key (the file is created if missing), any backend;
+    * else the simulated fleet gets a key of its own for this run (`EphemeralKey`), and SITL
+      autopilots are not signed (their keys are provisioned by the user, see the README).
+    """
+
+    def __init__(self, mission, *, insecure: bool, simulated: bool) -> None:
+        self.insecure = insecure
+        self.fleet_key: FleetKey | None = None
+        self.fleet: FleetSigning | None = None
+        self._ephemeral: EphemeralKey | None = None
+        self._rejections: RejectionLog | None = None
+        if insecure:
+            return
+        if mission.signing.key_file is not None:
+            self.fleet_key = load_or_create_key(mission.signing.key_file, mission.source)
+        elif simulated:
+            self._ephemeral = EphemeralKey()
+            self.fleet_key = self._ephemeral.fleet_key
+        if self.fleet_key is not None:
+            self.fleet = FleetSigning(self.fleet_key.key)
+
+    @property
+    def enabled(self) -> bool:
+        return self.fleet is not None
+
+    def notice(self) -> tuple[str, str]:
+        """(level, text) of what the run does about signing: a console line and a log event."""
+        if self.insecure:
+            return (
+                "warning",
+                "--insecure: MAVLink is NOT signed: any process that can reach the vehicles' "
+                "ports can command the fleet",
+            )
+        if self.fleet_key is None:
+            return (
+                "warning",
+                "MAVLink is not signed: set signing.key_file (and provision the autopilots with "
+                "it) to sign it",
+            )
+        if self.fleet_key.ephemeral:
+            return "info", "MAVLink 2 signed with a key made for this run"
+        made = " (created)" if self.fleet_key.created else ""
+        return "info", f"MAVLink 2 signed with the key of {self.fleet_key.path}{made}"
+
+    def vehicle_args(self) -> tuple[str, ...]:
+        """`vehicles sim` arguments that give the simulated vehicles the key."""
+        if self.fleet_key is None:
+            return ()
+        return ("--signing-key-file", str(self.fleet_key.path))
+
+    def record_to(self, event: Callable[..., None]) -> None:
+        """Write refused frames to the recording (`recorder.event`)."""
+        if self.fleet is not None:
+            self._rejections = RejectionLog(event)
+            self.fleet.on_reject = self._rejections
+
+    def apply(self, link: Link, uav: int) -> None:
+        if self.fleet is not None:
+            self.fleet.apply(link, uav)
+
+    def summary(self) -> dict:
+        """The run JSON's `signing` object (reporting what is still pending to the log)."""
+        if self._rejections is not None:
+            self._rejections.flush()
+        key = None
+        if self.fleet_key is not None:
+            key = "per-run" if self.fleet_key.ephemeral else str(self.fleet_key.path)
+        return {
+            "enabled": self.enabled,
+            "insecure": self.insecure,
+            "key": key,
+            "refused": self.fleet.totals() if self.fleet is not None else {},
+        }
+
+    def close(self) -> None:
+        """Remove the run's own key (idempotent)."""
+        if self._ephemeral is not None:
+            self._ephemeral.close()

@@ -29,7 +29,7 @@ from gcs.mission import load_mission
 from planner.formation import ParkingRows
 from planner.guarantees import check_positions
 from planner.kinematics import LineFormation, SpeedProfile
-from tests.flying import environment, gcs_command
+from tests.flying import environment, gcs_command, wait_line
 from tests.test_run_recording import (
     foxglove_channels,
     foxglove_connect,
@@ -63,19 +63,6 @@ class Flown:
     stderr: str
     live_channels: dict
     live_fix: object
-
-
-def _wait_line(stream, selector, needle: str, deadline: float, seen: list[str]) -> str:
-    while time.monotonic() < deadline:
-        if not selector.select(max(0.0, deadline - time.monotonic())):
-            continue
-        line = stream.readline()
-        if not line:
-            break
-        seen.append(line)
-        if needle in line:
-            return line
-    raise AssertionError(f"never saw {needle!r}; stderr: {''.join(seen[-20:])}")
 
 
 def _watch_live(port: int, deadline: float) -> tuple[dict, object]:
@@ -120,7 +107,7 @@ def flown(tmp_path_factory) -> Flown:
         selector = selectors.DefaultSelector()
         selector.register(process.stderr, selectors.EVENT_READ)
         deadline = time.monotonic() + 60
-        line = _wait_line(process.stderr, selector, "Foxglove: live on ws://", deadline, seen)
+        line = wait_line(process.stderr, selector, "Foxglove: live on ws://", deadline, seen)
         port = int(line.strip().rsplit(":", 1)[1])
         channels, fix = _watch_live(port, deadline)
         out, err = process.communicate(timeout=120)

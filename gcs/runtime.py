@@ -12,7 +12,8 @@ to the drivers, and at each tick (the mission's setpoint rate in mission time):
 4. steps the drivers (handshakes, retransmissions), runs the monitors, records.
 
 There is no other thread: if this loop stalls, the setpoints stop and the vehicles' own
-failsafes see it. Mission time 0 is when the formation starts moving; the clock is anchored
+failsafes see it; once it runs again it pauses the mission where the UAVs stopped (the mission
+clock is held back, `_resume_after_stall`), so that they are not asked to catch up. Mission time 0 is when the formation starts moving; the clock is anchored
 once every UAV is ready, so that UAV 1 (which leaves at t = 0) takes off at -lead. With
 `speedup` K the mission clock runs K times faster than the wall clock; every wall delay keeps
 a floor (`DriverTiming`).
@@ -120,6 +121,12 @@ class MissionClock:
     def wall_at(self, mission_time: float) -> float:
         return self._zero_wall + mission_time / self.speedup
 
+    def hold_back(self, mission_seconds: float) -> None:
+        """Pause the mission for `mission_seconds` that already passed on the wall clock (a
+        stall the vehicles did not fly through): mission time stays continuous and monotonic,
+        and the epoch is kept, so log times stay on the one time base (CONTRACTS.md, MCAP)."""
+        self._zero_wall += mission_seconds / self.speedup
+
     def log_time_ns(self, wall: float) -> int:
         return self.epoch_ns + int(round(self.mission_time(wall) * 1e9))
 
@@ -189,27 +196,46 @@ class RunResult:
     radio: dict | None = None  # the radio medium's run JSON `radio` object, if one ran
 
 
+def _paused(t: float, at: float, length: float) -> float:
+    """Mission time `t` (as the clock read before it was held back by `length` at `at`) as it
+    reads after: unchanged before the pause, the pause itself during it, `length` earlier after
+    it."""
+    return min(t, max(t - length, at))
+
+
 class VehicleClock:
     """Maps one vehicle's clock (time_boot_ms) to mission time, so that samples keep the time
     they were taken even when the ground station read them late (a busy machine, a stall).
 
     offset = min over recent samples of (mission time at receipt - vehicle time): the least
     delayed sample bounds the offset best. Both clocks run at the same speedup. A vehicle clock
-    that goes backwards (a reboot) starts the estimate over.
+    that goes backwards (a reboot) starts the estimate over. After the mission clock was held
+    back (`pause`), a sample taken while the mission stood still maps to the instant it paused.
     """
 
     def __init__(self, window: int = 50) -> None:
         self._offsets: deque[float] = deque(maxlen=window)
         self._last: float | None = None
+        self._pause: tuple[float, float] | None = None  # (mission time it paused at, length)
+
+    def pause(self, at: float, length: float) -> None:
+        """The mission clock stood still at mission time `at` for `length` vehicle seconds."""
+        self._offsets = deque((o - length for o in self._offsets), maxlen=self._offsets.maxlen)
+        self._pause = (at, length)
 
     def mission_time(self, vehicle_s: float | None, received_s: float) -> float:
         if vehicle_s is None:
             return received_s
         if self._last is not None and vehicle_s < self._last:
             self._offsets.clear()
+            self._pause = None
         self._last = vehicle_s
         self._offsets.append(received_s - vehicle_s)
-        return min(vehicle_s + min(self._offsets), received_s)
+        mapped = vehicle_s + min(self._offsets)
+        if self._pause is not None:
+            at, length = self._pause
+            mapped = _paused(mapped + length, at, length)  # the offsets are after the pause
+        return min(mapped, received_s)
 
 
 class View(Protocol):
@@ -324,7 +350,7 @@ class MissionRun:
         self._settle_deadline: float | None = None
         self.ticks = 0
         self.radio_report: dict | None = None  # the radio medium's last report
-        self._last_tick_wall: float | None = None
+        self._last_awake: float | None = None  # wall: the loop last ran (a tick or a receive)
         self.current_speed = plan.speeds.initial
         self.tracking_now = np.full(size, np.nan)
         self.mission_time = None
@@ -471,7 +497,9 @@ class MissionRun:
                 return
 
     def _receive(self, selector, timeout: float) -> None:
-        for key, _ in selector.select(timeout):
+        ready = selector.select(timeout)
+        stalled_since = self._stalled_since(self._monotonic())
+        for key, _ in ready:
             index = key.data
             driver = self.drivers[index]
             now = self._monotonic()
@@ -484,13 +512,14 @@ class MissionRun:
                     kind == "GLOBAL_POSITION_INT" and driver.telemetry.true_time is None
                 ):
                     self._on_position(index, driver, kind == "SIM_STATE", now)
+        if stalled_since is not None:
+            self._resume_after_stall(stalled_since, self._monotonic())
 
     # ------------------------------------------------------------------ the tick
     def _tick(self, now: float) -> None:
         self.ticks += 1
         t = self.clock.mission_time(now)
         self.mission_time = t
-        self._check_stall(t, now)
         self._handle_interrupts(now)
         self._handle_requests(t, now)
         self._schedule_uavs(t, now)
@@ -506,20 +535,72 @@ class MissionRun:
             self._last_view = now
             self.view.update(self, now)
 
-    def _check_stall(self, t: float, now: float) -> None:
-        """The scheduler itself stalled (the process was stopped, starved of CPU): no setpoint
-        went out for long enough that the vehicles' own failsafe made them hold. Nothing is
-        replayed: the next tick streams the targets of the present instant, the vehicles follow
-        again, and the tracking monitor measures the catch-up."""
-        gap = 0.0 if self._last_tick_wall is None else now - self._last_tick_wall
-        self._last_tick_wall = now
+    def _stalled_since(self, now: float) -> float | None:
+        """The wall time the loop last ran, if it stalled since (the process was stopped or
+        starved of CPU for a setpoint timeout of mission time); else None."""
+        last, self._last_awake = self._last_awake, now
+        if last is None or not self.clock.anchored:
+            return None
+        gap = now - last
         if gap * self.options.speedup < STALL_S or gap < STALL_WALL_FLOOR_S:
-            return
+            return None
+        return last
+
+    def _resume_after_stall(self, last: float, now: float) -> None:
+        """No setpoint went out from wall time `last` to `now`: each vehicle flew on by itself
+        (its own setpoint timeout: carry the last setpoint forward, brake, hold) and the
+        telemetry that queued meanwhile has just been read. The mission pauses where the
+        formation stands: the mission clock is held back to the instant whose virtual targets
+        best match the UAVs' latest positions, the vehicles' clocks are told at once, and the
+        samples taken after that instant map to it. The formation then resumes from where the
+        UAVs are instead of chasing targets that ran on without them. (Records written while
+        the queue was read keep the later log time they were stamped with.)"""
+        t_last, t_now = self.clock.mission_time(last), self.clock.mission_time(now)
+        paused_at = self._where_the_formation_stands(t_last, t_now)
+        held_back = t_now - paused_at
         text = (
-            f"GCS scheduler stalled {gap:.2f} s ({gap * self.options.speedup:.1f} s of mission "
-            "time): no setpoints meanwhile, the vehicles held on their own failsafe"
+            f"GCS scheduler stalled {now - last:.2f} s ({t_now - t_last:.1f} s of mission "
+            "time): no setpoints meanwhile, the vehicles flew on their own failsafe; "
         )
-        self._event(MonitorEvent(t, "warning", "stall", text), now)
+        if held_back > 1e-3:
+            self.clock.hold_back(held_back)
+            for clock in self._vehicle_clocks:
+                clock.pause(paused_at, held_back)
+            self._samples = [
+                (uav, _paused(t, paused_at, held_back), xyz, truth)
+                for uav, t, xyz, truth in self._samples
+            ]
+            for track in self.tracks:
+                if track.last_sample_time is not None:
+                    track.last_sample_time = _paused(track.last_sample_time, paused_at, held_back)
+            for driver in self.drivers:
+                driver.on_mission_clock_changed(now)
+            text += (
+                f"mission clock held back {held_back:.2f} s, the formation resumes where the "
+                "UAVs stand"
+            )
+        else:
+            text += "they kept up with the formation"
+        self._event(MonitorEvent(paused_at, "warning", "stall", text), now)
+
+    def _where_the_formation_stands(self, t_from: float, t_to: float) -> float:
+        """The mission time in [t_from, t_to] whose virtual targets are nearest (least squares)
+        to the following UAVs' latest positions; `t_to` if none is following or the formation
+        did not move."""
+        following = [
+            i
+            for i, driver in enumerate(self.drivers)
+            if driver.phase == Phase.FOLLOWING and self.tracks[i].last_position is not None
+        ]
+        count = int(np.clip(math.ceil((t_to - t_from) / 0.02) + 1, 2, 5001))
+        times = np.linspace(t_from, t_to, count)
+        distances = self.profile.distance(times)
+        if not following or distances[-1] - distances[0] < 1e-6:
+            return t_to
+        virtual = self.formation.positions(distances)[:, following]  # (count, k, 2)
+        positions = np.array([self.tracks[i].last_position[:2] for i in following])
+        cost = ((virtual - positions) ** 2).sum(axis=(1, 2))
+        return float(times[int(np.argmin(cost))])
 
     def _handle_interrupts(self, now: float) -> None:
         while self._handled_interrupts < self.interrupts:

@@ -123,3 +123,37 @@ def test_vehicle_clock_recovers_sample_times_from_delayed_receipts(offset, delay
         smallest = min(smallest, delay)
         mapped = clock.mission_time(vehicle, offset + vehicle + delay)
         assert offset + vehicle - 1e-9 <= mapped <= offset + vehicle + smallest + 1e-9
+
+
+def test_holding_the_mission_clock_back_keeps_mission_and_log_time_continuous():
+    """A stall of 2.5 mission s of which the vehicles flew 1 s: the mission resumes 1 s after
+    the last tick, on the same log time base."""
+    clock = MissionClock(5.0, monotonic=lambda: 50.0, unix_ns=lambda: 1_000 * 10**9)
+    clock.anchor(50.0, 0.0)
+    last_tick, resumed = 52.0, 52.5  # wall: 10 s, then 12.5 s of mission time
+    paused_at = clock.mission_time(last_tick) + 1.0
+    clock.hold_back(1.5)
+    assert clock.mission_time(resumed) == pytest.approx(paused_at) == 11.0
+    assert clock.log_time_ns(resumed) == 1_000 * 10**9 + 11 * 10**9  # epoch kept
+    assert clock.wall_at(11.0) == pytest.approx(resumed)
+
+
+def test_a_sample_taken_while_the_mission_paused_maps_to_the_pause():
+    """Samples every 0.1 s of vehicle time, received 20 ms late (so mapped 20 ms late); the GCS
+    stalls from mission time 10 s for 2.5 s, the vehicles fly 1 s of it: the mission pauses at
+    11 s for 1.5 s. Samples before the pause keep their time, those taken while the mission
+    stood still map to the pause, later ones are 1.5 s earlier than before."""
+    clock = VehicleClock()
+    offset, delay = 100.0, 0.02  # mission time = vehicle time + offset, until the stall
+    for k in range(101):  # vehicle time 0 .. 10 s, read as they come
+        vehicle = 0.1 * k
+        mapped = clock.mission_time(vehicle, offset + vehicle + delay)
+        assert mapped == pytest.approx(offset + vehicle + delay)
+    pause = offset + 11.0 + delay
+    clock.pause(pause, 1.5)
+    queued = [10.1 + 0.1 * k for k in range(24)]  # taken during the stall, read at its end
+    mapped = [clock.mission_time(v, pause) for v in queued]
+    assert mapped == pytest.approx([min(offset + v + delay, pause) for v in queued])
+    assert mapped[-1] == pytest.approx(pause) and mapped[0] < pause - 0.8
+    after = [clock.mission_time(v, offset + v - 1.5 + delay) for v in (12.6, 12.7, 15.0)]
+    assert after == pytest.approx([pause + 0.1, pause + 0.2, pause + 2.5])

@@ -60,6 +60,7 @@ What it MAY override (defaults: a plain, well-behaved autopilot)
 * `on_mode_changed(previous, now)`: the heartbeat's logical mode changed (failsafes).
 * `on_family_message(msg, now)`: messages the base does not handle (EKF_STATUS_REPORT, EVENT).
 * `on_heartbeat_sent(now)`: after each GCS heartbeat (periodic family traffic).
+* `on_mission_clock_changed(now)`: the mission clock was held back after a GCS stall.
 * `command_ack_is_final(pending, ack)`: PX4's double acknowledgement of DO_SET_MODE.
 * `_step_<phase>(now)` (`_step_connecting` ... `_step_failed`): advances one phase; `step`
   calls the current phase's.
@@ -351,6 +352,11 @@ class Driver(ABC):
 
     def on_family_message(self, msg, now: float) -> None:
         """Messages the base class does not interpret."""
+        return None
+
+    def on_mission_clock_changed(self, now: float) -> None:
+        """The runtime held the mission clock back (a stall): a family that tells its vehicles
+        the mission time tells them again now."""
         return None
 
     def on_heartbeat_sent(self, now: float) -> None:

@@ -63,6 +63,9 @@ class SimDriver(Driver):
     def on_heartbeat_sent(self, now: float) -> None:
         """The vehicles' mission clock: NAMED_VALUE_INT "MSN_TIME" = mission time in ms at
         sending (vehicles/fleet_speed.py); a leader sends its requests on that clock."""
+        self.on_mission_clock_changed(now)
+
+    def on_mission_clock_changed(self, now: float) -> None:
         mission_time = self.mission_clock(now)
         if mission_time is None:
             return

@@ -551,10 +551,11 @@ class MissionRun:
         (its own setpoint timeout: carry the last setpoint forward, brake, hold) and the
         telemetry that queued meanwhile has just been read. The mission pauses where the
         formation stands: the mission clock is held back to the instant whose virtual targets
-        best match the UAVs' latest positions, the vehicles' clocks are told at once, and the
-        samples taken after that instant map to it. The formation then resumes from where the
-        UAVs are instead of chasing targets that ran on without them. (Records written while
-        the queue was read keep the later log time they were stamped with.)"""
+        best match the UAVs' latest positions (`_where_the_formation_stands`), the vehicles'
+        clocks are told at once, and the samples taken after that instant map to it. The
+        formation then resumes from where the UAVs are instead of chasing targets that ran on
+        without them. (Records written while the queue was read keep the later log time they
+        were stamped with.)"""
         t_last, t_now = self.clock.mission_time(last), self.clock.mission_time(now)
         paused_at = self._where_the_formation_stands(t_last, t_now)
         held_back = t_now - paused_at
@@ -584,9 +585,9 @@ class MissionRun:
         self._event(MonitorEvent(paused_at, "warning", "stall", text), now)
 
     def _where_the_formation_stands(self, t_from: float, t_to: float) -> float:
-        """The mission time in [t_from, t_to] whose virtual targets are nearest (least squares)
-        to the following UAVs' latest positions; `t_to` if none is following or the formation
-        did not move."""
+        """The mission time in [t_from, t_to] whose virtual targets are nearest to the following
+        UAVs' latest positions (the least worst distance: the tracking error the monitor bounds);
+        `t_to` if none is following or the formation did not move."""
         following = [
             i
             for i, driver in enumerate(self.drivers)
@@ -599,8 +600,8 @@ class MissionRun:
             return t_to
         virtual = self.formation.positions(distances)[:, following]  # (count, k, 2)
         positions = np.array([self.tracks[i].last_position[:2] for i in following])
-        cost = ((virtual - positions) ** 2).sum(axis=(1, 2))
-        return float(times[int(np.argmin(cost))])
+        worst = np.hypot(*(virtual - positions).transpose(2, 0, 1)).max(axis=1)
+        return float(times[int(np.argmin(worst))])
 
     def _handle_interrupts(self, now: float) -> None:
         while self._handled_interrupts < self.interrupts:

@@ -189,14 +189,15 @@ def test_a_frozen_ground_station_makes_the_uavs_hold_then_follow_again(attacked)
     assert not any("GCS Failsafe" in t for t in texts)  # 3 s < the vehicles' 5 s GCS timeout
     assert not any(e["kind"] == "link_lost" for e in run["events"])
     # the formation resumed where the UAVs stood: they catch up only what they lose while
-    # accelerating (about 2 m at 5 m/s), not the 5 m more of a reference that ran on
+    # accelerating (about 2 m at 5 m/s) and how far apart in time they stopped (2.2 to 3.6 m
+    # in all, measured), not the 6 m more of a reference that ran on
     recording = read_recording(attacked["log"], keep=lambda topic: topic == "/metrics")
     after = [
         max(e for e in m["tracking_error_m"] if e is not None)
         for _, m in recording.messages("/metrics")
         if began - 1.0 <= m["t"] <= paused_at + 5.0
     ]
-    assert len(after) > 30 and max(after) < 3.0, max(after)
+    assert len(after) > 30 and max(after) < 4.5, max(after)
 
 
 def test_the_attacked_recording_is_complete(attacked):

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -27,6 +26,8 @@ import pymap3d
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from vehicles.ports import free_udp_ports  # re-exported: tests and benches pick ports here
+
 REPO_ROOT = Path(__file__).resolve().parent.parent
 GCS_SYSTEM = 255
 GCS_COMPONENT = 190
@@ -36,29 +37,6 @@ IGNORE_YAW = (
 MASK_POS_VEL_ACC = IGNORE_YAW  # 3072
 MASK_POS_VEL = IGNORE_YAW | 0b111000000  # 3520
 CLOCK_WINDOW_S = 1.0
-
-
-def free_udp_ports(count: int, host: str = "127.0.0.1", attempts: int = 50) -> int:
-    """A base port such that ``count`` consecutive UDP ports are free right now."""
-    for _ in range(attempts):
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-            probe.bind((host, 0))
-            base = probe.getsockname()[1]
-        if base + count > 65535:
-            continue
-        held: list[socket.socket] = []
-        try:
-            for port in range(base, base + count):
-                sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                held.append(sock)
-                sock.bind((host, port))
-        except OSError:
-            continue
-        finally:
-            for sock in held:
-                sock.close()
-        return base
-    raise RuntimeError(f"no {count} consecutive free UDP ports found")
 
 
 class VehicleProcess:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import logging
 import os
 import signal
-import socket
 import subprocess
 import sys
 from dataclasses import dataclass, field
@@ -26,6 +25,7 @@ from gcs.drivers.base import CommandSpec, Driver, Fleet, FleetProblem, FlightMod
 from gcs.geodesy import Origin
 from gcs.link import mavutil
 from gcs.radio import MediumProcess, MediumSetup
+from vehicles.ports import free_udp_ports
 
 log = logging.getLogger(__name__)
 mavlink = mavutil.mavlink
@@ -87,13 +87,6 @@ class SimDriver(Driver):
         return 0.5
 
 
-def free_udp_port(host: str = "127.0.0.1") -> int:
-    """A UDP port nobody uses right now (the OS picks it)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind((host, 0))
-        return sock.getsockname()[1]
-
-
 @dataclass
 class SimVehicleSetup:
     """How to start the simulated UAVs (what `SimFleet` passes to `vehicles sim`)."""
@@ -149,7 +142,7 @@ class SimFleet(Fleet):
 
     def start(self) -> list[str]:
         for group in self.setup.groups():
-            port = self._free_block(len(group))
+            port = free_udp_ports(len(group), self.host)
             for i, k in enumerate(group):
                 self.ports[k + 1] = port + i
             self.processes.append(self._spawn(group, port))
@@ -163,7 +156,7 @@ class SimFleet(Fleet):
         s = self.setup
         return MediumProcess(
             s.radio,
-            listen_port=self._free_block(len(self.ports)),
+            listen_port=free_udp_ports(len(self.ports), self.host),
             vehicle_ports=[self.ports[uav] for uav in sorted(self.ports)],
             starts=s.homes,
             sysid_base=s.sysid_base,
@@ -270,22 +263,3 @@ class SimFleet(Fleet):
         finally:
             if stderr is not subprocess.DEVNULL:
                 stderr.close()
-
-    def _free_block(self, size: int) -> int:
-        """A base port with `size` free consecutive UDP ports."""
-        for _ in range(50):
-            base = free_udp_port(self.host)
-            if base + size > 65535:
-                continue
-            if all(_udp_free(self.host, base + i) for i in range(1, size)):
-                return base
-        raise OSError(f"no block of {size} free UDP ports on {self.host}")
-
-
-def _udp_free(host: str, port: int) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        try:
-            sock.bind((host, port))
-        except OSError:
-            return False
-        return True

@@ -31,6 +31,8 @@ from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import all as mavlink  # noqa: E402
 from pymavlink.generator import mavparse  # noqa: E402
 
+from vehicles.ports import free_udp_ports  # noqa: E402
+
 #: MAV_RESULT values.
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
@@ -483,9 +485,5 @@ class FakeEndpoint:
 
 
 def free_udp_port() -> int:
-    """A UDP port on loopback that nothing is bound to right now."""
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+    """A UDP port on loopback that nothing is bound to right now (vehicles.ports)."""
+    return free_udp_ports(1)

@@ -50,20 +50,6 @@ def read_log(path: Path) -> dict[str, list[tuple[int, dict]]]:
     return topics
 
 
-def wait_line(stream, selector, needle: str, deadline: float, seen: list[str]) -> str:
-    """Read `stream` line by line until one contains `needle` (or fail at the deadline)."""
-    while time.monotonic() < deadline:
-        if not selector.select(max(0.0, deadline - time.monotonic())):
-            continue
-        line = stream.readline()
-        if not line:
-            break
-        seen.append(line)
-        if needle in line:
-            return line
-    raise AssertionError(f"never saw {needle!r}; last lines: {''.join(seen[-20:])}")
-
-
 def _parent_of(pid: int) -> int | None:
     try:
         status = Path(f"/proc/{pid}/status").read_text()
@@ -194,6 +180,15 @@ class Flight:
         if self.process.poll() is None:
             self.process.kill()
             self.process.wait()
+
+    def stop(self, grace_s: float = 30.0) -> None:
+        """SIGTERM (the GCS stops its vehicles on the way out), SIGKILL after `grace_s`."""
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=grace_s)
+            except subprocess.TimeoutExpired:
+                self.kill()
 
 
 def mission_file(folder: Path, **changes) -> Path:

@@ -9,10 +9,8 @@ from __future__ import annotations
 
 import base64
 import json
-import selectors
 import socket
 import subprocess
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,7 +27,7 @@ from gcs.mission import load_mission
 from planner.formation import ParkingRows
 from planner.guarantees import check_positions
 from planner.kinematics import LineFormation, SpeedProfile
-from tests.flying import environment, gcs_command, wait_line
+from tests.flying import Flight, environment, gcs_command
 from tests.test_run_recording import (
     foxglove_channels,
     foxglove_connect,
@@ -96,33 +94,21 @@ def _watch_live(port: int, deadline: float) -> tuple[dict, object]:
 def flown(tmp_path_factory) -> Flown:
     folder = tmp_path_factory.mktemp("flight")
     log = folder / "small.mcap"
-    command = [sys.executable, "-m", "gcs", "mission", "run", str(MISSION), "--speedup", SPEEDUP,
-               "--vehicles-per-process", "4", "--json", "--log", str(log), "--foxglove", "0"]  # fmt: skip
-    process = subprocess.Popen(
-        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=folder,
-        env=environment(),
+    flight = Flight(
+        ["mission", "run", str(MISSION), "--speedup", SPEEDUP, "--vehicles-per-process", "4",
+         "--json", "--log", str(log), "--foxglove", "0"],
+        folder,
     )  # fmt: skip
-    seen: list[str] = []
     try:
-        selector = selectors.DefaultSelector()
-        selector.register(process.stderr, selectors.EVENT_READ)
-        deadline = time.monotonic() + 60
-        line = wait_line(process.stderr, selector, "Foxglove: live on ws://", deadline, seen)
+        line = flight.lines[flight.wait_for("Foxglove: live on ws://")]
         port = int(line.strip().rsplit(":", 1)[1])
-        channels, fix = _watch_live(port, deadline)
-        out, err = process.communicate(timeout=120)
+        channels, fix = _watch_live(port, time.monotonic() + 60)
+        code, out, err = flight.finish(timeout=120)
     finally:
-        if process.poll() is None:  # SIGTERM: the GCS stops its vehicles on the way out
-            process.terminate()
-            try:
-                process.communicate(timeout=30)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.communicate()
-    err = "".join(seen) + err
+        flight.stop()  # SIGTERM: the GCS stops its vehicles on the way out
     assert out.count("\n") == 1, err[-3000:]
     run = json.loads(out)
-    assert process.returncode == 0, (run.get("reason"), err[-3000:])
+    assert code == 0, (run.get("reason"), err[-3000:])
     return Flown(log, run, err, channels, fix)
 
 

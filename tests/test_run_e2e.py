@@ -9,16 +9,14 @@ from __future__ import annotations
 
 import json
 import os
-import selectors
 import signal
 import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.flying import children_running, environment, gcs_command, read_log, wait_line
+from tests.flying import Flight, children_running, environment, gcs_command, read_log
 
 REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "examples" / "small.yaml"
@@ -128,23 +126,13 @@ def test_the_small_mission_flies_end_to_end(tmp_path: Path):
 
 def test_losing_a_vehicle_freezes_reports_and_lands_the_others(tmp_path: Path):
     log = tmp_path / "kill.mcap"
-    gcs = subprocess.Popen(
-        gcs_command(
-            "-v", "mission", "run", str(MISSION), "--speedup", SPEEDUP, *PER_PROCESS, "--json",
-            "--log", str(log), "--link-wait", "3",
-        ),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        cwd=tmp_path,
-        env=environment(),
+    flight = Flight(
+        ["-v", "mission", "run", str(MISSION), "--speedup", SPEEDUP, *PER_PROCESS, "--json",
+         "--log", str(log), "--link-wait", "3"],
+        tmp_path,
     )  # fmt: skip
-    seen: list[str] = []
     try:
-        selector = selectors.DefaultSelector()
-        selector.register(gcs.stderr, selectors.EVENT_READ)
-        deadline = time.monotonic() + 60
-        wait_line(gcs.stderr, selector, "UAV 2: taking_off -> following", deadline, seen)
+        flight.wait_for("UAV 2: taking_off -> following")
 
         # the operator, from another terminal: one change accepted, one refused
         speed = subprocess.run(
@@ -159,16 +147,14 @@ def test_losing_a_vehicle_freezes_reports_and_lands_the_others(tmp_path: Path):
         )  # fmt: skip
         assert too_fast.returncode == 1 and "refused" in too_fast.stderr
 
-        vehicles = children_running(gcs.pid, "-m vehicles sim")
+        vehicles = children_running(flight.pid, "-m vehicles sim")
         assert len(vehicles) == 3
-        (vehicle,) = children_running(gcs.pid, "--sysid-base 2 ")
+        (vehicle,) = children_running(flight.pid, "--sysid-base 2 ")
         os.kill(vehicle, signal.SIGKILL)
-        out, err = gcs.communicate(timeout=60)
+        code, out, err = flight.finish(timeout=60)
     finally:
-        if gcs.poll() is None:
-            gcs.kill()
-            gcs.communicate()
-    assert gcs.returncode == 1, err[-3000:]
+        flight.kill()
+    assert code == 1, err[-3000:]
     run = json.loads(out)
     assert run["completed"] is False
     assert "UAV 2" in run["reason"]
@@ -193,29 +179,20 @@ def test_losing_a_vehicle_freezes_reports_and_lands_the_others(tmp_path: Path):
 
 def test_ctrl_c_once_freezes_twice_lands_everyone_where_they_are(tmp_path: Path):
     log = tmp_path / "interrupted.mcap"
-    gcs = subprocess.Popen(
-        gcs_command(
-            "-v", "mission", "run", str(MISSION), "--speedup", SPEEDUP, *PER_PROCESS, "--json",
-            "--log", str(log),
-        ),
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
-        env=environment(),
+    flight = Flight(
+        ["-v", "mission", "run", str(MISSION), "--speedup", SPEEDUP, *PER_PROCESS, "--json",
+         "--log", str(log)],
+        tmp_path,
     )  # fmt: skip
-    seen: list[str] = []
     try:
-        selector = selectors.DefaultSelector()
-        selector.register(gcs.stderr, selectors.EVENT_READ)
-        deadline = time.monotonic() + 60
-        wait_line(gcs.stderr, selector, "UAV 1: taking_off -> following", deadline, seen)
-        gcs.send_signal(signal.SIGINT)
-        wait_line(gcs.stderr, selector, "(freeze:operator)", deadline, seen)
-        gcs.send_signal(signal.SIGINT)
-        out, err = gcs.communicate(timeout=60)
+        flight.wait_for("UAV 1: taking_off -> following")
+        os.kill(flight.pid, signal.SIGINT)
+        flight.wait_for("(freeze:operator)")
+        os.kill(flight.pid, signal.SIGINT)
+        code, out, err = flight.finish(timeout=60)
     finally:
-        if gcs.poll() is None:
-            gcs.kill()
-            gcs.communicate()
-    assert gcs.returncode == 1, err[-3000:]
+        flight.kill()
+    assert code == 1, err[-3000:]
     run = json.loads(out)
     assert run["completed"] is False and "interrupted" in run["reason"]
     freeze = [c for c in run["speed_changes"] if c["source"] == "freeze:operator"]

@@ -18,7 +18,7 @@ from vehicles.autopilot import Autopilot, AutopilotConfig, Stamp
 from vehicles.dynamics import DynamicsConfig, FleetDynamics
 from vehicles.fleet_speed import LeaderRequest
 from vehicles.frames import GeodeticOrigin
-from vehicles.telemetry import NEEDS_ESTIMATED_GEODETIC, NEEDS_TRUE_GEODETIC, FleetSnapshot
+from vehicles.telemetry import FleetSnapshot
 
 #: Streams a ground station in the same process has no use for (it reads the truth directly):
 #: off by default, so the fast mode spends its time on dynamics, not on geodesy.
@@ -98,19 +98,10 @@ class LockstepFleet:
         sim_s = self.sim_s
         stamp = Stamp(sim_s, sim_s)
         due_lists = []
-        estimated: list[int] = []
-        true: list[int] = []
-        for k, autopilot in enumerate(self.autopilots):
+        for autopilot in self.autopilots:
             autopilot.update(stamp)
-            due = autopilot.telemetry.due(sim_s)
-            due_lists.append(due)
-            if due:
-                if not NEEDS_ESTIMATED_GEODETIC.isdisjoint(due):
-                    estimated.append(k)
-                if not NEEDS_TRUE_GEODETIC.isdisjoint(due):
-                    true.append(k)
-        snapshot = FleetSnapshot(self.dynamics, self.config.origin)
-        snapshot.prefetch(estimated, true)
+            due_lists.append(autopilot.telemetry.due(sim_s))
+        snapshot = FleetSnapshot.for_due(self.dynamics, self.config.origin, due_lists)
         sent: list[tuple[int, mavlink.MAVLink_message]] = []
         for k, (autopilot, due) in enumerate(zip(self.autopilots, due_lists, strict=True)):
             for msg_id in due:

@@ -26,7 +26,7 @@ from vehicles.fleet_speed import LeaderRequest
 from vehicles.frames import GeodeticOrigin
 from vehicles.link import Address, VehicleLink
 from vehicles.signing import deliver_setup_signing, report_refusals
-from vehicles.telemetry import NEEDS_ESTIMATED_GEODETIC, NEEDS_TRUE_GEODETIC, FleetSnapshot
+from vehicles.telemetry import FleetSnapshot
 
 log = logging.getLogger(__name__)
 
@@ -207,21 +207,12 @@ class Simulation:
     def _tick(self, stamp: Stamp) -> None:
         """Run every autopilot, then build and send the telemetry that is due."""
         due_lists = []
-        estimated: list[int] = []
-        true: list[int] = []
-        for k, (autopilot, link) in enumerate(zip(self.autopilots, self.links, strict=True)):
+        for autopilot, link in zip(self.autopilots, self.links, strict=True):
             autopilot.comm_errors = link.stats.bad_datagrams
             autopilot.update(stamp)
             report_refusals(link, autopilot, stamp)  # refused (unsigned...) frames: STATUSTEXT
-            due = autopilot.telemetry.due(stamp.sim_s)
-            due_lists.append(due)
-            if due:
-                if not NEEDS_ESTIMATED_GEODETIC.isdisjoint(due):
-                    estimated.append(k)
-                if not NEEDS_TRUE_GEODETIC.isdisjoint(due):
-                    true.append(k)
-        snapshot = FleetSnapshot(self.dynamics, self.config.origin)
-        snapshot.prefetch(estimated, true)
+            due_lists.append(autopilot.telemetry.due(stamp.sim_s))
+        snapshot = FleetSnapshot.for_due(self.dynamics, self.config.origin, due_lists)
         for autopilot, link, due in zip(self.autopilots, self.links, due_lists, strict=True):
             for msg_id in due:
                 autopilot.emit(msg_id, snapshot, stamp)

@@ -149,6 +149,19 @@ class FleetSnapshot:
         self._estimated: dict[int, tuple[float, float, float]] = {}
         self._true: dict[int, tuple[float, float, float]] = {}
 
+    @classmethod
+    def for_due(
+        cls, dynamics: FleetDynamics, origin: GeodeticOrigin, due_lists: list[list[int]]
+    ) -> FleetSnapshot:
+        """The snapshot of a tick whose due messages are `due_lists` (per vehicle), with the
+        geodetic positions they need already converted in one call."""
+        snapshot = cls(dynamics, origin)
+        snapshot.prefetch(
+            [k for k, due in enumerate(due_lists) if not NEEDS_ESTIMATED_GEODETIC.isdisjoint(due)],
+            [k for k, due in enumerate(due_lists) if not NEEDS_TRUE_GEODETIC.isdisjoint(due)],
+        )
+        return snapshot
+
     def prefetch(self, estimated: list[int], true: list[int]) -> None:
         """Convert the listed vehicles' estimated and true positions in one vectorised call."""
         if not estimated and not true:

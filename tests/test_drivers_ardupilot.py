@@ -15,7 +15,7 @@ from gcs.drivers.base import Phase
 from gcs.geodesy import Origin
 from tests.fakes.ardupilot import GUIDED, LAND, ArduCopterModel
 from tests.fakes.flight import Flight, SinkDriver, home_of, hover, leg
-from tests.fakes.replay import SITL_DIR, drive, load
+from tests.fakes.replay import drive, load
 
 SPEEDUP = 40.0  # the boot's ~42 s take ~1 s
 ORIGIN = Origin(-35.3632, 149.1652, 584.0)
@@ -199,7 +199,6 @@ def test_vehicle_leaving_guided_by_itself_is_a_failsafe_event():
         assert flight.texts("failsafe") == ["the vehicle left guided flight by itself: mode LAND"]
 
 
-@pytest.mark.skipif(not SITL_DIR.is_dir(), reason=f"SITL transcripts not found in {SITL_DIR}")
 def test_recorded_ardupilot_session_drives_the_state_machine():
     """A1 as recorded (ArduCopter SITL's own messages, re-encoded) into the driver: it is ready
     only once the EKF uses GPS and the pre-arm bit agrees (42.59), follows the recorded arming

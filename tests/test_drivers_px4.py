@@ -24,7 +24,7 @@ from tests.fakes.px4 import (
     POSCTL,
     Px4Model,
 )
-from tests.fakes.replay import SITL_DIR, drive, load
+from tests.fakes.replay import drive, load
 
 SPEEDUP = 20.0
 ORIGIN = Origin(47.3975, 8.5450, 488.0)
@@ -229,7 +229,6 @@ def test_landing_from_a_vehicle_failsafe_mode_is_followed():
         assert flight.run_until(lambda: not model.armed, 3.0)
 
 
-@pytest.mark.skipif(not SITL_DIR.is_dir(), reason=f"SITL transcripts not found in {SITL_DIR}")
 def test_recorded_px4_session_drives_the_state_machine():
     """P1 as recorded (PX4 SITL's own messages, re-encoded; EVENTs dropped as the link drops
     them) into the driver: ready at the pre-arm bit, no ARM while OFFBOARD lacks the stream (the

@@ -1,4 +1,5 @@
-"""The fake autopilots are faithful to the recorded SITL sessions of `shared/sitl/`.
+"""The fake autopilots are faithful to the recorded SITL sessions of `shared/sitl/` (the copy in
+`tests/sitl/`, checked against the original when `../shared/sitl` is beside the repository).
 
 1. Every recorded message re-encodes with pymavlink from its `fields` and decodes back to the
    same values (so the fakes and these tests speak the recorded bytes).
@@ -14,6 +15,8 @@
 from __future__ import annotations
 
 import functools
+import gzip
+from pathlib import Path
 
 import pytest
 
@@ -30,16 +33,29 @@ from tests.fakes.replay import (
     same_value,
 )
 
-pytestmark = pytest.mark.skipif(
-    not SITL_DIR.is_dir(), reason=f"SITL transcripts not found in {SITL_DIR}"
-)
-
 TRANSCRIPTS = (
     "ardupilot-session.jsonl",
     "ardupilot-refusals.jsonl",
     "px4-session.jsonl.gz",
     "px4-refusals.jsonl",
 )
+
+#: The project's original recordings, when the repository sits beside `shared/`.
+SHARED_SITL = Path(__file__).resolve().parents[2] / "shared" / "sitl"
+
+
+@pytest.mark.skipif(not SHARED_SITL.is_dir(), reason="no ../shared/sitl beside the repository")
+def test_the_copied_transcripts_are_the_recorded_ones():
+    for name in (*TRANSCRIPTS, "README.md"):
+        original = (SHARED_SITL / name).read_bytes()
+        copy = SITL_DIR / name
+        if not copy.exists():
+            copy = SITL_DIR / f"{name}.gz"
+        data = copy.read_bytes()
+        if copy.suffix == ".gz" and not name.endswith(".gz"):
+            data = gzip.decompress(data)
+        assert data == original, name
+
 
 #: STATUSTEXTs the ArduPilot fake reproduces (others are SITL boot chatter).
 ARDUPILOT_TEXTS = {

@@ -13,10 +13,10 @@ from pathlib import Path
 
 from tests.fakes.common import ExtraMessage, mavlink, message_from_fields
 
-#: Where the recorded sessions live: `../shared/sitl` beside the repository (read-only, shared
-#: by the project), or `$FLEETLINE_SITL_DIR`.
+#: The recorded sessions: `tests/sitl/`, a copy of the project's `../shared/sitl` (gzipped; a
+#: clean clone has no `shared/` beside it), or `$FLEETLINE_SITL_DIR` (either layout).
 SITL_DIR = Path(
-    os.environ.get("FLEETLINE_SITL_DIR") or Path(__file__).resolve().parents[3] / "shared" / "sitl"
+    os.environ.get("FLEETLINE_SITL_DIR") or Path(__file__).resolve().parents[1] / "sitl"
 )
 
 #: Commands a ground station sends (they open a response window).
@@ -36,8 +36,10 @@ class Record:
 
 
 def load(name: str) -> list[Record]:
-    """Read one transcript (`.jsonl` or `.jsonl.gz`)."""
+    """Read one transcript (`.jsonl` or `.jsonl.gz`; a `.jsonl` may be stored gzipped)."""
     path = SITL_DIR / name
+    if not path.exists() and path.suffix == ".jsonl":
+        path = path.with_name(path.name + ".gz")
     opener = gzip.open if path.suffix == ".gz" else open
     with opener(path, "rt", encoding="utf-8") as lines:
         return [

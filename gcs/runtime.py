@@ -13,8 +13,9 @@ to the drivers, and at each tick (the mission's setpoint rate in mission time):
 
 There is no other thread: if this loop stalls, the setpoints stop and the vehicles' own
 failsafes see it; once it runs again it pauses the mission where the UAVs stopped (the mission
-clock is held back, `_resume_after_stall`), so that they are not asked to catch up. Mission time 0 is when the formation starts moving; the clock is anchored
-once every UAV is ready, so that UAV 1 (which leaves at t = 0) takes off at -lead. With
+clock is held back, `_resume_after_stall`), so that they are not asked to catch up. Mission
+time 0 is when the formation starts moving; the clock is anchored once every UAV is ready, so
+that UAV 1 (which leaves at t = 0) takes off at -lead. With
 `speedup` K the mission clock runs K times faster than the wall clock; every wall delay keeps
 a floor (`DriverTiming`).
 

@@ -17,8 +17,9 @@ from gcs.geodesy import geodetic_to_enu
 from gcs.mission import load_mission
 from gcs.sitl import launch_plan, plan_for_launch
 from tests.fakes.ardupilot import ArduCopterModel
-from tests.fakes.common import FakeEndpoint, Home, enu_to_global, free_udp_port
+from tests.fakes.common import FakeEndpoint, Home, enu_to_global
 from tests.fakes.px4 import Px4Model
+from vehicles.ports import free_udp_ports
 
 pytestmark = pytest.mark.slow
 
@@ -56,7 +57,7 @@ def test_mission_run_flies_a_sitl_fleet(run_command, tmp_path, backend):
     for v in launch_plan(mission, backend).vehicles:
         home = Home(v.latitude, v.longitude, v.altitude)
         if backend == "px4":
-            port = free_udp_port()
+            port = free_udp_ports()
             model = Px4Model(home, system_id=v.system_id, speedup=speedup, seed=v.uav_id)
             fakes.append(FakeEndpoint(model, f"udpout:127.0.0.1:{port}"))
             urls.append(f"udpin:127.0.0.1:{port}")

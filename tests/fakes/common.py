@@ -31,8 +31,6 @@ from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import all as mavlink  # noqa: E402
 from pymavlink.generator import mavparse  # noqa: E402
 
-from vehicles.ports import free_udp_ports  # noqa: E402
-
 #: MAV_RESULT values.
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
@@ -482,8 +480,3 @@ class FakeEndpoint:
                             pass  # nobody listening yet: UDP drops it, as it would
         finally:
             selector.close()
-
-
-def free_udp_port() -> int:
-    """A UDP port on loopback that nothing is bound to right now (vehicles.ports)."""
-    return free_udp_ports(1)

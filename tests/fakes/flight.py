@@ -19,7 +19,8 @@ from gcs.drivers import driver_class
 from gcs.drivers.base import Driver, DriverEvent, DriverTiming, UavSpec
 from gcs.geodesy import Origin, enu_to_geodetic
 from gcs.link import Link
-from tests.fakes.common import FakeEndpoint, Home, free_udp_port
+from tests.fakes.common import FakeEndpoint, Home
+from vehicles.ports import free_udp_ports
 
 #: (position (3,), velocity (3,)) in the local ENU frame at mission time t (vehicle-time seconds
 #: since the route began, the wall clock times the speedup), velocities in vehicle-time m/s.
@@ -76,7 +77,7 @@ class Flight:
     ) -> Flight:
         """Start the fake (ArduPilot: listening, PX4: pushing to our port) and the driver."""
         if backend == "px4":
-            port = free_udp_port()
+            port = free_udp_ports()
             link = Link(f"udpin:127.0.0.1:{port}", model.system_id)
             fake = FakeEndpoint(model, f"udpout:127.0.0.1:{port}")
         else:

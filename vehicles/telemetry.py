@@ -155,11 +155,16 @@ class FleetSnapshot:
     ) -> FleetSnapshot:
         """The snapshot of a tick whose due messages are `due_lists` (per vehicle), with the
         geodetic positions they need already converted in one call."""
+        estimated: list[int] = []
+        true: list[int] = []
+        for k, due in enumerate(due_lists):
+            if due:  # most ticks send nothing: the per-tick hot path of the simulator
+                if not NEEDS_ESTIMATED_GEODETIC.isdisjoint(due):
+                    estimated.append(k)
+                if not NEEDS_TRUE_GEODETIC.isdisjoint(due):
+                    true.append(k)
         snapshot = cls(dynamics, origin)
-        snapshot.prefetch(
-            [k for k, due in enumerate(due_lists) if not NEEDS_ESTIMATED_GEODETIC.isdisjoint(due)],
-            [k for k, due in enumerate(due_lists) if not NEEDS_TRUE_GEODETIC.isdisjoint(due)],
-        )
+        snapshot.prefetch(estimated, true)
         return snapshot
 
     def prefetch(self, estimated: list[int], true: list[int]) -> None:

@@ -23,8 +23,8 @@ bench: $(STAMP)
 	$(BIN)/python -m bench
 
 lint: $(STAMP)
-	$(BIN)/ruff check gcs planner vehicles tests bench
-	$(BIN)/ruff format --check gcs planner vehicles tests bench
+	$(BIN)/ruff check fleetwire gcs planner vehicles tests bench
+	$(BIN)/ruff format --check fleetwire gcs planner vehicles tests bench
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

@@ -1,14 +1,13 @@
 """MAVLink 2 signing of the ground station's links, and the fleet key (pymavlink's signing).
 
-The fleet key. A key file is a text file holding a passphrase on its first line; the 32-byte
-signing key is the SHA-256 of that passphrase, exactly what MAVProxy's `signing setup
-PASSPHRASE` derives, so the same file provisions ArduPilot or PX4 SITL through MAVProxy. `gcs`
-creates a missing key file (`signing.key_file`, relative to the mission file) with owner-only
-permissions and 64 random hex digits (256 bits); a key file that group or others may read, an
-empty or short passphrase, or a missing folder is bad input (exit 2). Without
-`signing.key_file`, the simulated fleet gets a fresh key for the run (`EphemeralKey`), written
-only to an owner-only file in a private temporary folder that the vehicle processes read at
-start and that is removed at the end of the run.
+The fleet key. The key file's rules (a passphrase on its first line, the key its SHA-256 as
+MAVProxy's `signing setup PASSPHRASE` derives, owner-only) are `fleetwire.signing`'s, shared
+with the vehicles. `gcs` creates a missing key file (`signing.key_file`, relative to the
+mission file) with owner-only permissions and 64 random hex digits (256 bits); a key file that
+group or others may read, an empty or short passphrase, or a missing folder is bad input (exit
+2). Without `signing.key_file`, the simulated fleet gets a fresh key for the run
+(`EphemeralKey`), written only to an owner-only file in a private temporary folder that the
+vehicle processes read at start and that is removed at the end of the run.
 
 The links. `FleetSigning.apply(link)` calls mavutil's `setup_signing` on each link (sign
 everything sent, no unsigned input accepted) and makes every link of the fleet share ONE
@@ -19,11 +18,9 @@ refused when unsigned, wrongly signed, or replayed (a timestamp not newer than t
 its stream (link id, system, component), or a new stream more than a minute old). Refused
 frames never reach a driver and never count as "link alive" (the `Link` sees them as bad data).
 
-One hardening over pymavlink 2.4.50: its `check_signature` records a stream's timestamp BEFORE
-it compares the signature (history: ArduPilot/pymavlink#961), so one forged frame with a future
-timestamp would make every later genuine frame of that stream look like a replay (the MAVLink
-C library checks the signature first). `SignatureCheck` compares the signature first and only
-then lets pymavlink check and record the timestamp.
+One hardening over pymavlink 2.4.50 (`fleetwire.signing.SignatureCheck`, as the vehicles'):
+the signature is compared before pymavlink checks and records the stream's timestamp, so one
+forged frame with a future timestamp cannot make every later genuine frame look like a replay.
 
 Refusals are counted per UAV and kind (`unsigned`, `bad_signature`, `replayed`) and written to
 the recording's `/events` by `RejectionLog` (the first at once, then at most one summary per
@@ -32,13 +29,8 @@ UAV per second, and the remainder at the end of the run).
 
 from __future__ import annotations
 
-import hashlib
-import hmac
 import logging
-import os
-import secrets
 import shutil
-import stat
 import tempfile
 import time
 from collections import Counter
@@ -46,30 +38,25 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fleetwire.signing import LINK_ID as GCS_LINK_ID
+from fleetwire.signing import (
+    REJECTION_KINDS,
+    ClockedSigning,
+    KeyFileError,
+    SignatureCheck,
+    check_key,
+    create_key_file,
+    key_from_passphrase,
+    read_key_file,
+)
 from gcs.errors import InputError
 from gcs.link import Link, mavutil
 
 log = logging.getLogger(__name__)
 mavlink = mavutil.mavlink
 
-#: Link id of the ground station's signed stream (MAVLink 2 signing).
-GCS_LINK_ID = 0
-#: A passphrase shorter than this is refused (the key is only as strong as the passphrase).
-MIN_PASSPHRASE_CHARS = 16
-#: Kinds of refused frames.
-REJECTION_KINDS = ("unsigned", "bad_signature", "replayed")
 #: A UAV's refusals are summarised in the log at most this often (wall seconds).
 REPORT_PERIOD_S = 1.0
-_SIGNATURE_BYTES = 6
-SIGNING_EPOCH = 1420070400  # MAVLink 2 signing timestamps count 10 us from 2015-01-01
-
-#: Called for each refused frame: (kind, source system or None, message id or None).
-OnReject = Callable[[str, int | None, int | None], None]
-
-
-def key_from_passphrase(passphrase: str) -> bytes:
-    """The 32-byte signing key of a passphrase: SHA-256, as MAVProxy's `signing setup`."""
-    return hashlib.sha256(passphrase.encode()).digest()
 
 
 @dataclass(frozen=True)
@@ -96,44 +83,19 @@ def load_or_create_key(
         if not path.parent.is_dir():
             raise InputError(source, key_path, f"a file in an existing folder, got {path}")
         try:
-            descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+            create_key_file(path)
         except OSError as error:
             raise InputError(
                 source, key_path, f"a writable key file ({error.strerror}: {path})"
             ) from None
-        with os.fdopen(descriptor, "w") as handle:
-            handle.write(secrets.token_hex(32) + "\n")
         created = True
         log.info("created the fleet key file %s", path)
     try:
-        info = path.stat()
-    except OSError as error:
-        raise InputError(
-            None, key_path, f"a readable key file ({error.strerror}: {path})"
-        ) from None
-    if not stat.S_ISREG(info.st_mode):
-        raise InputError(source, key_path, f"a regular file, got {path}")
-    if info.st_mode & 0o077:
-        raise InputError(
-            source,
-            key_path,
-            f"a key file only its owner can access (chmod 600 {path}), "
-            f"got mode {stat.S_IMODE(info.st_mode):03o}",
-        )
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError):
-        raise InputError(source, key_path, f"a readable UTF-8 key file ({path})") from None
-    lines = text.splitlines()
-    passphrase = lines[0].strip() if lines else ""
-    if len(passphrase) < MIN_PASSPHRASE_CHARS:
-        raise InputError(
-            source,
-            key_path,
-            f"a passphrase of at least {MIN_PASSPHRASE_CHARS} characters on the first line of "
-            f"{path} (delete the file to get a random one)",
-        )
-    return FleetKey(key_from_passphrase(passphrase), path.resolve(), created=created)
+        key = read_key_file(path)
+    except KeyFileError as error:
+        hint = " (delete the file to get a random one)" if error.kind == "passphrase" else ""
+        raise InputError(source, key_path, error.expected + hint) from None
+    return FleetKey(key, path.resolve(), created=created)
 
 
 class EphemeralKey:
@@ -143,89 +105,11 @@ class EphemeralKey:
     def __init__(self) -> None:
         self.folder = Path(tempfile.mkdtemp(prefix="fleetline-key-"))  # mode 0700
         path = self.folder / "fleet.key"
-        descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-        passphrase = secrets.token_hex(32)
-        with os.fdopen(descriptor, "w") as handle:
-            handle.write(passphrase + "\n")
+        passphrase = create_key_file(path)
         self.fleet_key = FleetKey(key_from_passphrase(passphrase), path, True, ephemeral=True)
 
     def close(self) -> None:
         shutil.rmtree(self.folder, ignore_errors=True)
-
-
-def _message_id(msgbuf: bytes) -> int | None:
-    """Message id from a MAVLink 2 header (bytes 7-9), None if it is not one."""
-    if len(msgbuf) >= 10 and msgbuf[0] == mavlink.PROTOCOL_MARKER_V2:
-        return msgbuf[7] | msgbuf[8] << 8 | msgbuf[9] << 16
-    return None
-
-
-def clock_timestamp() -> int:
-    """The wall clock as a MAVLink 2 signing timestamp (10 us units since 2015-01-01)."""
-    return int(max(time.time() - SIGNING_EPOCH, 0.0) * 100_000)
-
-
-class ClockedSigning(mavlink.MAVLinkSigning):
-    """pymavlink's signing state, with a timestamp that never falls behind the wall clock.
-
-    pymavlink starts the timestamp at the clock and adds 1 (10 us) per frame sent, so a link
-    sending a few hundred frames a second signs with timestamps that fall further behind the
-    clock every second; then a frame recorded earlier by someone holding the key, or any frame
-    dated by the clock, would be newer than everything genuine. MAVLink 2 asks a system with a
-    clock to use it: the timestamp read for each frame is max(the counter, the clock).
-    """
-
-    def __init__(self, state: mavlink.MAVLinkSigning) -> None:
-        self._timestamp = 0
-        super().__init__()
-        self.__dict__.update({k: v for k, v in vars(state).items() if k != "timestamp"})
-        self.timestamp = state.timestamp
-
-    @property
-    def timestamp(self) -> int:
-        return max(self._timestamp, clock_timestamp())
-
-    @timestamp.setter
-    def timestamp(self, value: int) -> None:
-        self._timestamp = int(value)
-
-
-class SignatureCheck:
-    """Installed on one pymavlink `MAVLink` codec: the signature is compared before pymavlink
-    checks and records the stream's timestamp, and every refusal is reported to `on_reject`.
-
-    pymavlink calls `allow_unsigned_callback` for unsigned frames and again after a failed
-    signature check; `unsigned` tells the two apart and never accepts.
-    """
-
-    def __init__(self, mav, on_reject: OnReject) -> None:
-        self.mav = mav
-        self.on_reject = on_reject
-        self._pymavlink_check = mav.check_signature  # the class's method, bound
-        self._failed = False
-        mav.check_signature = self.check  # the instance attribute shadows the method
-
-    def check(self, msgbuf: bytearray, source_system: int, source_component: int) -> bool:
-        key = self.mav.signing.secret_key
-        digest = hashlib.sha256(key + bytes(msgbuf[:-_SIGNATURE_BYTES])).digest()
-        if not hmac.compare_digest(digest[:_SIGNATURE_BYTES], bytes(msgbuf[-_SIGNATURE_BYTES:])):
-            self._refuse("bad_signature", source_system, _message_id(msgbuf))
-            return False
-        if self._pymavlink_check(msgbuf, source_system, source_component):
-            return True
-        self._refuse("replayed", source_system, _message_id(msgbuf))
-        return False
-
-    def unsigned(self, mav, message_id: int) -> bool:
-        if self._failed:  # pymavlink asks again after a failed check: already counted
-            self._failed = False
-            return False
-        self.on_reject("unsigned", None, message_id)
-        return False
-
-    def _refuse(self, kind: str, source_system: int, message_id: int | None) -> None:
-        self._failed = True
-        self.on_reject(kind, source_system, message_id)
 
 
 class FleetSigning:
@@ -234,8 +118,7 @@ class FleetSigning:
     def __init__(
         self, key: bytes, on_reject: Callable[[int, str, int | None], None] | None = None
     ) -> None:
-        if len(key) != 32:
-            raise ValueError("a MAVLink 2 signing key is 32 bytes")
+        check_key(key)
         self.key = key
         self.on_reject = on_reject
         self.rejected: dict[int, Counter] = {}  # UAV id -> Counter(kind)

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.modes import COPTER_MODE
 from gcs.logreader import read_recording
 from gcs.recording import FLUSH_PERIOD_S
 from gcs.signing import load_or_create_key
@@ -36,7 +37,7 @@ from tests.flying import (
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
-GUIDED, LAND, BRAKE = 4, 9, 17
+GUIDED, LAND, BRAKE = COPTER_MODE["GUIDED"], COPTER_MODE["LAND"], COPTER_MODE["BRAKE"]
 ALL_FOLLOWING = "UAV 4: taking_off -> following"
 
 

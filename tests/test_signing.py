@@ -18,16 +18,11 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.modes import COPTER_MODE
+from fleetwire.signing import ClockedSigning, clock_timestamp
 from gcs.errors import InputError
 from gcs.link import Link
-from gcs.signing import (
-    ClockedSigning,
-    EphemeralKey,
-    FleetSigning,
-    RejectionLog,
-    clock_timestamp,
-    load_or_create_key,
-)
+from gcs.signing import EphemeralKey, FleetSigning, RejectionLog, load_or_create_key
 from tests.attacker import codec, timestamp_now
 from tests.flying import alive, environment
 from tests.test_run_link import drain
@@ -37,7 +32,7 @@ from vehicles.testing import GroundStation, VehicleProcess
 
 SPEEDUP = 4.0
 RNG = random.Random(8)  # keys of the tests and of their attackers
-GUIDED, LAND = 4, 9
+GUIDED, LAND = COPTER_MODE["GUIDED"], COPTER_MODE["LAND"]
 
 
 # --------------------------------------------------------------------------- the key file

@@ -8,10 +8,13 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.modes import COPTER_MODE
 from vehicles.testing import GroundStation, VehicleProcess, local_of
 
 SPEEDUP = 5.0
-GUIDED, LOITER, LAND, STABILIZE = 4, 5, 9, 0
+GUIDED, LOITER, LAND, STABILIZE = (
+    COPTER_MODE[m] for m in ("GUIDED", "LOITER", "LAND", "STABILIZE")
+)
 UNKNOWN_COMMAND = 12345
 
 

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.modes import COPTER_MODE
 from vehicles.testing import GroundStation, SmoothedPath, VehicleProcess, local_of
 
-GUIDED, LOITER, LAND, BRAKE = 4, 5, 9, 17
+GUIDED, LOITER, LAND, BRAKE = (COPTER_MODE[m] for m in ("GUIDED", "LOITER", "LAND", "BRAKE"))
 SPEEDUP = 10.0
 
 

@@ -34,6 +34,15 @@ from enum import IntEnum
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.messages import (
+    GCS_SYSTEM_ID,
+    SPEED_CHANGE_COMMAND,
+    SPEED_CHANGE_FRAME,
+    decode_mission_time,
+    decode_speed_change,
+    encode_speed_change,
+)
+from fleetwire.modes import COPTER_MODE
 from vehicles import telemetry
 from vehicles.dynamics import FleetDynamics
 from vehicles.fleet_speed import LeaderRequest, LeaderSchedule, MissionClock, SpeedBook, SpeedChange
@@ -45,19 +54,15 @@ log = logging.getLogger(__name__)
 AUTOPILOT_COMPONENT = 1  # MAV_COMP_ID_AUTOPILOT1
 FORCE_ARM_MAGIC = 2989
 FORCE_DISARM_MAGIC = 21196
-MISSION_TIME_NAME = "MSN_TIME"
 MAX_EXTRAPOLATION_S = 1.0  # a setpoint's feed-forward is extrapolated for at most this long
 
 
-class Mode(IntEnum):
-    """ArduCopter flight modes the simulation implements (custom_mode numbers)."""
-
-    STABILIZE = 0
-    GUIDED = 4
-    LOITER = 5
-    RTL = 6
-    LAND = 9
-    BRAKE = 17
+#: ArduCopter flight modes the simulation implements (custom_mode numbers, pymavlink's).
+Mode = IntEnum(
+    "Mode",
+    {name: COPTER_MODE[name] for name in ("STABILIZE", "GUIDED", "LOITER", "RTL", "LAND", "BRAKE")},
+    module=__name__,
+)
 
 
 ARMABLE_MODES = (Mode.GUIDED, Mode.LOITER)
@@ -89,7 +94,7 @@ class FailsafeConfig:
     gcs_timeout_s: float = 5.0
     gcs_hold_s: float = 5.0  # hold this long after the GCS is lost, then land
     wall_floor_s: float = 0.25
-    gcs_system: int = 255
+    gcs_system: int = GCS_SYSTEM_ID
 
 
 @dataclass(frozen=True)
@@ -137,6 +142,7 @@ class _Command:
     y: int | None
     source_system: int
     source_component: int
+    message: mavlink.MAVLink_message | None = None  # as received
 
 
 def _finite(*values: float) -> bool:
@@ -599,17 +605,11 @@ class Autopilot:
             mavlink.MAVLink_command_int_message(
                 self.config.failsafe.gcs_system,
                 0,
-                mavlink.MAV_FRAME_MISSION,
-                mavlink.MAV_CMD_DO_CHANGE_SPEED,
+                SPEED_CHANGE_FRAME,
+                SPEED_CHANGE_COMMAND,
                 0,
                 0,
-                1.0,
-                speed,
-                -1.0,
-                0.0,
-                0,
-                sequence,
-                0.0,
+                *encode_speed_change(speed, 0, sequence),
             )
         )
         self.leader.sent(sequence, speed, stamp.sim_s, stamp.wall_s)
@@ -655,8 +655,9 @@ class Autopilot:
     def _on_named_value_int(self, msg: mavlink.MAVLink_message, stamp: Stamp) -> None:
         if msg.get_srcSystem() != self.config.failsafe.gcs_system:
             return
-        if _text(msg.name) == MISSION_TIME_NAME:
-            self.mission_clock.sync(int(msg.value) / 1000.0, stamp.sim_s)
+        mission_time = decode_mission_time(msg)
+        if mission_time is not None:
+            self.mission_clock.sync(mission_time, stamp.sim_s)
 
     def _on_timesync(self, msg: mavlink.MAVLink_message, stamp: Stamp) -> None:
         if msg.tc1 == 0:
@@ -789,7 +790,7 @@ class Autopilot:
             msg.param7,
         )
         cmd = _Command(
-            msg.command, params, None, None, None, msg.get_srcSystem(), msg.get_srcComponent()
+            msg.command, params, None, None, None, msg.get_srcSystem(), msg.get_srcComponent(), msg
         )
         self._dispatch(cmd, stamp)
 
@@ -803,6 +804,7 @@ class Autopilot:
             msg.y,
             msg.get_srcSystem(),
             msg.get_srcComponent(),
+            msg,
         )
         self._dispatch(cmd, stamp)
 
@@ -813,8 +815,8 @@ class Autopilot:
             return
         result = handler(cmd, stamp)
         if result >= 0:
-            result_param2 = cmd.y if cmd.command == mavlink.MAV_CMD_DO_CHANGE_SPEED and cmd.y else 0
-            self._ack(cmd, result, result_param2)
+            speed = decode_speed_change(cmd.message) if cmd.message is not None else None
+            self._ack(cmd, result, speed.sequence if speed is not None else 0)
         # a negative result means the handler already acknowledged
 
     def _cmd_set_mode(self, cmd: _Command, stamp: Stamp) -> int:
@@ -888,7 +890,8 @@ class Autopilot:
         return mavlink.MAV_RESULT_ACCEPTED
 
     def _cmd_change_speed(self, cmd: _Command, stamp: Stamp) -> int:
-        speed = cmd.params[1]
+        command = decode_speed_change(cmd.message)
+        speed = command.speed
         if (
             not _finite(speed)
             or not (speed >= 0.0 or speed in (-1.0, -2.0))
@@ -898,8 +901,8 @@ class Autopilot:
             return mavlink.MAV_RESULT_DENIED
         if speed < 0:
             return mavlink.MAV_RESULT_ACCEPTED  # -1 / -2: no change / default
-        sequence = cmd.y or 0
-        effective = cmd.x / 1000.0 if cmd.x else None
+        sequence = command.sequence
+        effective = command.effective_s
         change = SpeedChange(cmd.source_system, sequence, effective, float(speed), stamp.sim_s)
         if self.speeds.record(change):
             log.info(

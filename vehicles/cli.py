@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+from fleetwire.messages import GCS_SYSTEM_ID
 from vehicles.autopilot import AutopilotConfig, FailsafeConfig
 from vehicles.dynamics import Airframe, Disturbances, DynamicsConfig
 from vehicles.fleet_speed import LeaderRequest
@@ -286,8 +287,8 @@ def build_parser() -> argparse.ArgumentParser:
     add(
         "--gcs-sysid",
         type=_integer("--gcs-sysid", 1, 255),
-        default=255,
-        help="system id of the GCS (255)",
+        default=GCS_SYSTEM_ID,
+        help=f"system id of the GCS ({GCS_SYSTEM_ID})",
     )
     add(
         "--timeout-floor",

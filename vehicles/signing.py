@@ -14,88 +14,40 @@ the key either). New refusals are reported to the ground station in a STATUSTEXT
 ``Signing: refused U unsigned, B bad, R old``) at most every ``REPORT_INTERVAL_S`` of
 simulated time.
 
-Hardening (as in the ground station's ``gcs/signing.py``): pymavlink 2.4.50 records a stream's
-timestamp before comparing the signature, so one forged frame with a far-future timestamp
-would lock the real ground station out; here the signature is compared first.
+The key file's rules, the clocked timestamp and the hardening (pymavlink 2.4.50 records a
+stream's timestamp before comparing the signature, so one forged frame with a far-future
+timestamp would lock the real ground station out; the signature is compared first) are
+``fleetwire.signing``'s, shared with the ground station.
 """
 
 from __future__ import annotations
 
-import hashlib
-import hmac
 import logging
-import stat
-import time
 from collections import Counter
-from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.signing import (
+    LINK_ID,
+    ClockedSigning,
+    KeyFileError,
+    SignatureCheck,
+    check_key,
+    read_key_file,
+)
+
+#: The key file's error and reader are re-exported (the CLI's, and the tests').
+__all__ = [
+    "KeyFileError",
+    "VehicleSigning",
+    "deliver_setup_signing",
+    "read_key_file",
+    "report_refusals",
+]
+
 log = logging.getLogger(__name__)
 
-SIGNING_EPOCH = 1420070400  # MAVLink 2 signing timestamps count 10 us from 2015-01-01
-LINK_ID = 0
-MIN_PASSPHRASE_CHARS = 16
 REPORT_INTERVAL_S = 2.0
-REJECTION_KINDS = ("unsigned", "bad_signature", "replayed")
-_SIGNATURE_BYTES = 6
-
-
-class KeyFileError(ValueError):
-    """A key file that cannot be used (the message says why, naming the file)."""
-
-
-def key_from_passphrase(passphrase: str) -> bytes:
-    """The 32-byte signing key of a passphrase (SHA-256, as MAVProxy's ``signing setup``)."""
-    return hashlib.sha256(passphrase.encode()).digest()
-
-
-def read_key_file(path: str | Path) -> bytes:
-    """The key of an owner-only key file; ``KeyFileError`` if it is not one."""
-    path = Path(path)
-    try:
-        info = path.stat()
-        if not stat.S_ISREG(info.st_mode):
-            raise KeyFileError(f"{path}: expected a regular key file")
-        if info.st_mode & 0o077:
-            raise KeyFileError(
-                f"{path}: expected a key file only its owner can access (chmod 600), "
-                f"got mode {stat.S_IMODE(info.st_mode):03o}"
-            )
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError) as error:
-        raise KeyFileError(
-            f"{path}: expected a readable key file ({error.__class__.__name__})"
-        ) from None
-    passphrase = lines[0].strip() if lines else ""
-    if len(passphrase) < MIN_PASSPHRASE_CHARS:
-        raise KeyFileError(
-            f"{path}: expected a passphrase of at least {MIN_PASSPHRASE_CHARS} characters "
-            "on its first line"
-        )
-    return key_from_passphrase(passphrase)
-
-
-def _now_timestamp() -> int:
-    return int(max(time.time() - SIGNING_EPOCH, 0.0) * 100_000)
-
-
-class ClockedSigning(mavlink.MAVLinkSigning):
-    """pymavlink's signing state with a timestamp that never falls behind the wall clock
-    (pymavlink adds 10 us per frame from the start, so a busy link's timestamps lag the clock;
-    MAVLink 2 asks a system with a clock to use it), as the ground station's."""
-
-    def __init__(self) -> None:
-        self._timestamp = 0
-        super().__init__()
-
-    @property
-    def timestamp(self) -> int:
-        return max(self._timestamp, _now_timestamp())
-
-    @timestamp.setter
-    def timestamp(self, value: int) -> None:
-        self._timestamp = int(value)
 
 
 class VehicleSigning:
@@ -106,8 +58,6 @@ class VehicleSigning:
         self.rejected: Counter = Counter()
         self._reported: Counter = Counter()
         self._last_report_s: float | None = None
-        self._failed = False
-        self._pymavlink_check = codec.check_signature
         if key is not None:
             self.enable(key)
 
@@ -118,37 +68,17 @@ class VehicleSigning:
     def enable(self, key: bytes, initial_timestamp: int = 0) -> None:
         """Sign from now on with ``key`` (as mavutil's ``setup_signing``): unsigned input is
         refused, the timestamp starts at the wall clock (or ``initial_timestamp`` if later)."""
-        if len(key) != 32:
-            raise ValueError("a MAVLink 2 signing key is 32 bytes")
+        check_key(key)
+        check = SignatureCheck(self.codec, self._refused)  # the signature before the timestamp
         signing = self.codec.signing = ClockedSigning()
         signing.secret_key = bytes(key)
         signing.sign_outgoing = True
         signing.link_id = LINK_ID
-        signing.allow_unsigned_callback = self._unsigned
+        signing.allow_unsigned_callback = check.unsigned
         signing.timestamp = int(initial_timestamp)  # the clock if later (ClockedSigning)
-        self.codec.check_signature = self._check  # the instance attribute shadows the method
 
-    # -- checks (called by pymavlink while it decodes a frame) ---------------------------
-    def _check(self, msgbuf: bytearray, source_system: int, source_component: int) -> bool:
-        key = self.codec.signing.secret_key
-        digest = hashlib.sha256(key + bytes(msgbuf[:-_SIGNATURE_BYTES])).digest()
-        if not hmac.compare_digest(digest[:_SIGNATURE_BYTES], bytes(msgbuf[-_SIGNATURE_BYTES:])):
-            return self._refuse("bad_signature")
-        if self._pymavlink_check(msgbuf, source_system, source_component):
-            return True
-        return self._refuse("replayed")
-
-    def _refuse(self, kind: str) -> bool:
-        self._failed = True
+    def _refused(self, kind: str, source_system: int | None, message_id: int | None) -> None:
         self.rejected[kind] += 1
-        return False
-
-    def _unsigned(self, codec: mavlink.MAVLink, message_id: int) -> bool:
-        if self._failed:  # pymavlink asks again after a failed check: already counted
-            self._failed = False
-            return False
-        self.rejected["unsigned"] += 1
-        return False
 
     # -- provisioning --------------------------------------------------------------------
     def setup(self, message: mavlink.MAVLink_message, sysid: int, armed: bool) -> str | None:

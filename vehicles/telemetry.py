@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.messages import MISSION_TIME_NAME, encode_mission_time
 from vehicles.dynamics import GRAVITY_MPS2, FleetDynamics
 from vehicles.frames import GeodeticOrigin
 
@@ -487,7 +488,7 @@ def mission_time(
     if now is None:
         return None
     return mavlink.MAVLink_named_value_int_message(
-        _boot_ms(stamp), b"MSN_TIME", _clamp_int(now * 1000, -(2**31), 2**31 - 1)
+        _boot_ms(stamp), MISSION_TIME_NAME, encode_mission_time(now)
     )
 
 

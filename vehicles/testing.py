@@ -26,16 +26,13 @@ import pymap3d
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.messages import GCS_COMPONENT_ID as GCS_COMPONENT
+from fleetwire.messages import GCS_SYSTEM_ID as GCS_SYSTEM
+from fleetwire.messages import MASK_POSITION_VELOCITY as MASK_POS_VEL
+from fleetwire.messages import MASK_POSITION_VELOCITY_ACCELERATION as MASK_POS_VEL_ACC
 from vehicles.ports import free_udp_ports  # re-exported: tests and benches pick ports here
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-GCS_SYSTEM = 255
-GCS_COMPONENT = 190
-IGNORE_YAW = (
-    mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
-)
-MASK_POS_VEL_ACC = IGNORE_YAW  # 3072
-MASK_POS_VEL = IGNORE_YAW | 0b111000000  # 3520
 CLOCK_WINDOW_S = 1.0
 
 

@@ -24,15 +24,16 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+from fleetwire.modes import COPTER_MODE, COPTER_MODE_NAME
 from gcs.drivers.autopilot import AutopilotDriver
 from gcs.drivers.base import CommandSpec, FlightMode, Phase, RetryPolicy, mavlink
 
-#: Copter mode numbers (HEARTBEAT custom_mode) the driver uses.
-STABILIZE, GUIDED, LOITER, RTL, LAND, BRAKE, SMART_RTL = 0, 4, 5, 6, 9, 17, 21
+#: Copter mode numbers (HEARTBEAT custom_mode) the driver uses (pymavlink's).
+GUIDED, RTL, LAND, BRAKE, SMART_RTL = (
+    COPTER_MODE[name] for name in ("GUIDED", "RTL", "LAND", "BRAKE", "SMART_RTL")
+)
 COPTER_MODES = {FlightMode.GUIDED: GUIDED, FlightMode.HOLD: BRAKE, FlightMode.LAND: LAND}
 _MODE_OF_NUMBER = {number: mode for mode, number in COPTER_MODES.items()}
-_MODE_NAMES = {0: "STABILIZE", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER", 6: "RTL",
-               9: "LAND", 16: "POSHOLD", 17: "BRAKE", 21: "SMART_RTL"}  # fmt: skip
 #: Modes that end on the ground by themselves.
 _LANDING_MODES = frozenset({LAND, RTL, SMART_RTL})
 
@@ -78,7 +79,7 @@ class ArduPilotDriver(AutopilotDriver):
         return CommandSpec(
             mavlink.MAV_CMD_DO_SET_MODE,
             (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, COPTER_MODES[mode], 0, 0, 0, 0, 0),
-            label=f"mode {_MODE_NAMES[COPTER_MODES[mode]]}",
+            label=f"mode {COPTER_MODE_NAME[COPTER_MODES[mode]]}",
         )
 
     def current_mode(self) -> FlightMode | None:
@@ -117,7 +118,7 @@ class ArduPilotDriver(AutopilotDriver):
 
     def describe_mode(self) -> str:
         number = self.telemetry.custom_mode
-        return _MODE_NAMES.get(number, str(number))
+        return COPTER_MODE_NAME.get(number, str(number))
 
     # ------------------------------------------------------------------ capabilities
     @property

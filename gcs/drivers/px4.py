@@ -32,32 +32,23 @@ from __future__ import annotations
 import math
 from typing import ClassVar
 
+from fleetwire.modes import PX4_MODE, PX4_MODE_PARTS, px4_custom_mode
 from gcs.drivers.autopilot import AutopilotDriver
 from gcs.drivers.base import CommandSpec, FlightMode, Phase, RetryPolicy, mavlink
 
-
-def px4_custom_mode(main: int, sub: int = 0) -> int:
-    """HEARTBEAT custom_mode of a PX4 main mode and sub-mode (px4_custom_mode.h)."""
-    return (main << 16) | (sub << 24)
-
-
-MAIN_POSCTL, MAIN_AUTO, MAIN_OFFBOARD = 3, 4, 6
-SUB_TAKEOFF, SUB_LOITER, SUB_RTL, SUB_LAND = 2, 3, 5, 6
-OFFBOARD = px4_custom_mode(MAIN_OFFBOARD)
-AUTO_LOITER = px4_custom_mode(MAIN_AUTO, SUB_LOITER)
-AUTO_LAND = px4_custom_mode(MAIN_AUTO, SUB_LAND)
-AUTO_RTL = px4_custom_mode(MAIN_AUTO, SUB_RTL)
-POSCTL = px4_custom_mode(MAIN_POSCTL)
+#: HEARTBEAT custom_mode of the PX4 modes the driver meets (pymavlink's `px4_map`).
+OFFBOARD, AUTO_LOITER, AUTO_LAND, AUTO_RTL, AUTO_TAKEOFF, POSCTL = (
+    PX4_MODE[name] for name in ("OFFBOARD", "LOITER", "LAND", "RTL", "TAKEOFF", "POSCTL")
+)
 #: Logical mode -> (main mode, sub-mode) for MAV_CMD_DO_SET_MODE params 2 and 3.
 PX4_MODES = {
-    FlightMode.GUIDED: (MAIN_OFFBOARD, 0),
-    FlightMode.HOLD: (MAIN_AUTO, SUB_LOITER),
-    FlightMode.LAND: (MAIN_AUTO, SUB_LAND),
+    FlightMode.GUIDED: PX4_MODE_PARTS["OFFBOARD"],
+    FlightMode.HOLD: PX4_MODE_PARTS["LOITER"],
+    FlightMode.LAND: PX4_MODE_PARTS["LAND"],
 }
 _MODE_OF_CUSTOM = {px4_custom_mode(*pair): mode for mode, pair in PX4_MODES.items()}
 _MODE_NAMES = {OFFBOARD: "OFFBOARD", AUTO_LOITER: "AUTO.LOITER", AUTO_LAND: "AUTO.LAND",
-               AUTO_RTL: "AUTO.RTL", POSCTL: "POSCTL",
-               px4_custom_mode(MAIN_AUTO, SUB_TAKEOFF): "AUTO.TAKEOFF"}  # fmt: skip
+               AUTO_RTL: "AUTO.RTL", POSCTL: "POSCTL", AUTO_TAKEOFF: "AUTO.TAKEOFF"}  # fmt: skip
 
 
 class PX4Driver(AutopilotDriver):

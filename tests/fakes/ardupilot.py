@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fleetwire.modes import COPTER_MODE
 from tests.fakes.common import (
     ACCEPTED,
     ARMED_FLAG,
@@ -55,15 +56,19 @@ from tests.fakes.common import (
     text,
 )
 
-# Copter mode numbers (custom_mode).
-STABILIZE, GUIDED, LAND = 0, 4, 9
-#: Every Copter mode number of 4.7 (anything else: `No such mode N`).
+# Copter mode numbers (custom_mode), pymavlink's.
+STABILIZE, GUIDED, LAND = COPTER_MODE["STABILIZE"], COPTER_MODE["GUIDED"], COPTER_MODE["LAND"]
+#: Every Copter mode number of 4.7 (anything else: `No such mode N`): the firmware's, which is
+#: not pymavlink's table (that has 8, 10 and 29 too).
 KNOWN_MODES = frozenset({0, 1, 2, 3, 4, 5, 6, 7, 9, 11, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22,
                          23, 24, 25, 26, 27, 28})  # fmt: skip
 #: Modes whose base_mode carries MAV_MODE_FLAG_GUIDED_ENABLED (seen: GUIDED, LAND).
-_GUIDED_FLAG_MODES = frozenset({3, 4, 5, 6, 9, 16, 17, 21, 26, 27})
+_GUIDED_FLAG_MODES = frozenset(COPTER_MODE[name] for name in (
+    "AUTO", "GUIDED", "LOITER", "RTL", "LAND", "POSHOLD", "BRAKE", "SMART_RTL", "AUTOROTATE",
+    "AUTO_RTL"))  # fmt: skip
 #: Modes that need a position estimate to arm.
-_POSITION_MODES = frozenset({3, 4, 5, 6, 16, 17, 21})
+_POSITION_MODES = frozenset(COPTER_MODE[name] for name in (
+    "AUTO", "GUIDED", "LOITER", "RTL", "POSHOLD", "BRAKE", "SMART_RTL"))  # fmt: skip
 
 # HEARTBEAT base_mode pieces: CUSTOM_MODE_ENABLED | STABILIZE_ENABLED | MANUAL_INPUT_ENABLED.
 _BASE = 1 | 16 | 64

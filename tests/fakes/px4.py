@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fleetwire.modes import PX4_AUTO_SUB_MODE, PX4_MAIN_MODE, px4_custom_mode
 from tests.fakes.common import (
     ACCEPTED,
     ARMED_FLAG,
@@ -59,16 +60,16 @@ from tests.fakes.common import (
     text,
 )
 
-
-def px4_mode(main: int, sub: int = 0) -> int:
-    """HEARTBEAT custom_mode of a PX4 main mode and sub-mode."""
-    return (main << 16) | (sub << 24)
-
-
+#: HEARTBEAT custom_mode of a PX4 main mode and sub-mode.
+px4_mode = px4_custom_mode
+# PX4's main modes and AUTO sub-modes (pymavlink's numbers).
 MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO, MAIN_ACRO, MAIN_OFFBOARD, MAIN_STABILIZED = (
-    1, 2, 3, 4, 5, 6, 7
-)  # fmt: skip
-SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 2, 3, 4, 5, 6
+    PX4_MAIN_MODE[name]
+    for name in ("MANUAL", "ALTCTL", "POSCTL", "AUTO", "ACRO", "OFFBOARD", "STABILIZED")
+)
+SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = (
+    PX4_AUTO_SUB_MODE[name] for name in ("TAKEOFF", "LOITER", "MISSION", "RTL", "LAND")
+)
 AUTO_LOITER = px4_mode(MAIN_AUTO, SUB_LOITER)  # 0x03040000
 AUTO_TAKEOFF = px4_mode(MAIN_AUTO, SUB_TAKEOFF)  # 0x02040000
 AUTO_LAND = px4_mode(MAIN_AUTO, SUB_LAND)  # 0x06040000

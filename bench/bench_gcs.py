@@ -1,6 +1,6 @@
 """GCS streaming capacity: how many UAVs one GCS process streams setpoints to at 50 Hz.
 
-For fleet sizes N, the real scheduler loop (`MissionRun.fly`) streams
+For fleet sizes N, the real scheduler loop (`GroundStation.fly`) streams
 SET_POSITION_TARGET_GLOBAL_INT with feed-forward from the smoothed reference to N plain UDP
 sinks on loopback (bound sockets nobody reads: no simulated vehicle competes for the CPU),
 with the MCAP recording on (every setpoint and every MAVLink message recorded). Reported: the
@@ -25,10 +25,12 @@ from rich.table import Table
 
 from gcs.drivers.base import DriverTiming, Phase, UavSpec
 from gcs.drivers.sim import SimDriver
+from gcs.flight.clock import MissionClock
+from gcs.flight.core import GroundStation, RunOptions
+from gcs.flight.live import LiveLoop
 from gcs.link import Link
 from gcs.mission import parse_mission
 from gcs.recording import FlightRecorder
-from gcs.runtime import MissionClock, MissionRun, RunOptions
 from planner.formation import min_fleet_size, parking_rows
 from planner.kinematics import LineFormation, SpeedProfile
 
@@ -47,7 +49,7 @@ class _Speeds:
 
 @dataclass(frozen=True, eq=False)
 class _Plan:
-    """What `MissionRun` reads of a `MissionPlan`: a straight path, no planner search needed."""
+    """What `GroundStation` reads of a `MissionPlan`: a straight path, no planner search needed."""
 
     mission: object
     formation: LineFormation
@@ -111,7 +113,8 @@ def measure(size: int, seconds: float, directory: Path) -> dict:
         driver.phase = Phase.FOLLOWING  # airborne from the start: streaming only
         drivers.append(driver)
         links.append(link)
-    run = MissionRun(plan, drivers, clock, recorder, options)
+    run = GroundStation(plan, drivers, clock, recorder, options)
+    loop = LiveLoop(run)
     for track in run.tracks:
         track.takeoff_sent = True
     began = time.monotonic()
@@ -119,7 +122,7 @@ def measure(size: int, seconds: float, directory: Path) -> dict:
         link.last_valid_time = began  # sinks never answer: keep the link monitor quiet
     clock.anchor(began, 10.0)
     cpu = time.process_time()
-    run.fly(until=lambda wall: wall - began >= seconds)
+    loop.fly(until=lambda wall: wall - began >= seconds)
     cpu = time.process_time() - cpu
     elapsed = time.monotonic() - began
     walls = np.array(run._tick_walls)
@@ -130,7 +133,7 @@ def measure(size: int, seconds: float, directory: Path) -> dict:
         link.close()
     for sink in sinks:
         sink.close()
-    work = np.array(run.tick_work) * 1000
+    work = np.array(loop.tick_work) * 1000
     return {
         "size": size,
         "work_p99_ms": float(np.percentile(work, 99)),

@@ -27,7 +27,7 @@ from gcs.link import mavutil
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
 from gcs.recording import FlightRecorder
-from gcs.runtime import MissionClock
+from gcs.flight.clock import MissionClock
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "table-ii.yaml"
 RATE_HZ = 10.0

@@ -26,12 +26,14 @@ from gcs.drivers import BackendUnavailable, driver_class
 from gcs.drivers.base import DriverTiming, ExternalFleet, UavSpec
 from gcs.drivers.sim import SimFleet, SimVehicleSetup
 from gcs.errors import InputError
+from gcs.flight.clock import MissionClock
+from gcs.flight.core import GroundStation, RunOptions
+from gcs.flight.live import LiveLoop
 from gcs.link import Link
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
 from gcs.radio import medium_setup
 from gcs.recording import FlightRecorder, LiveServerError
-from gcs.runtime import MissionClock, MissionRun, RunOptions
 from gcs.signing import RunSigning
 from gcs.speed import OperatorSocket, socket_path_for
 from gcs.summary import EXIT_ABORTED, exit_status, run_json, summary_renderable
@@ -260,9 +262,8 @@ def run_command(args: argparse.Namespace) -> int:
             view = LiveView(Console(stderr=True))
             stack.callback(view.close)
             options = RunOptions(**{**options.__dict__, "interactive": view.interactive})
-        run = MissionRun(
-            plan, drivers, clock, recorder, options, fleet=fleet, operator=operator, view=view
-        )
+        run = GroundStation(plan, drivers, clock, recorder, options, view=view)
+        loop = LiveLoop(run, fleet=fleet, operator=operator)
         previous = signal.getsignal(signal.SIGINT)
 
         def on_sigint(signum, frame):
@@ -278,7 +279,7 @@ def run_command(args: argparse.Namespace) -> int:
         stack.callback(signal.signal, signal.SIGTERM, previous_term)
         signal.signal(signal.SIGINT, on_sigint)
         stack.callback(signal.signal, signal.SIGINT, previous)
-        result = run.run()
+        result = loop.run()
         data = run_json(result, str(log_path), mission.safety_margin)
         data["signing"] = signing.summary()
         recorder.outcome(data)

@@ -22,11 +22,10 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink import mavutil  # noqa: E402
 
-log = logging.getLogger(__name__)
+# The ground station's MAVLink identity (CONTRACTS.md: the GCS is system 255): the fleet's.
+from fleetwire.messages import GCS_COMPONENT_ID, GCS_SYSTEM_ID  # noqa: E402
 
-#: The ground station's MAVLink identity (CONTRACTS.md: the GCS is system 255).
-GCS_SYSTEM_ID = 255
-GCS_COMPONENT_ID = mavutil.mavlink.MAV_COMP_ID_MISSIONPLANNER  # 190
+log = logging.getLogger(__name__)
 
 #: Bound on the messages one `receive` call drains (the scheduler must get back to its tick).
 MAX_MESSAGES_PER_RECEIVE = 10_000
@@ -194,3 +193,49 @@ class Link:
         self.counters.sent += 1
         if self.capture is not None:
             self.capture("tx", bytes(message.get_msgbuf()), message, self._now)
+
+
+class MemoryLink:
+    """A UAV's link inside one process (the fast mode): the same interface as `Link` for the
+    drivers and the core, no socket. What the driver sends is packed (the GCS's identity and a
+    sequence number, as on the wire) and queued in `outbox` for the caller to carry (through
+    the radio medium model); what the caller delivers goes through `accept`, which keeps, as
+    `Link.receive` does, only the valid messages of the expected system id."""
+
+    def __init__(self, url: str, system_id: int) -> None:
+        self.url = url
+        self.system_id = system_id
+        self.counters = LinkCounters()
+        self.last_valid_time: float | None = None
+        self.seen_system_ids: set[int] = set()
+        self.mav = mavutil.mavlink.MAVLink(
+            None, srcSystem=GCS_SYSTEM_ID, srcComponent=GCS_COMPONENT_ID
+        )
+        self.outbox: list = []
+
+    def send(self, message, now: float) -> None:
+        message.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        self.counters.sent += 1
+        self.outbox.append(message)
+
+    def accept(self, messages: list, now: float) -> list:
+        """The messages that arrived at `now`; returns the valid ones of this UAV."""
+        valid = []
+        for message in messages:
+            source = message.get_srcSystem()
+            self.seen_system_ids.add(source)
+            if source != self.system_id:
+                self.counters.foreign += 1
+                continue
+            self.counters.received += 1
+            self.last_valid_time = now
+            valid.append(message)
+        return valid
+
+    def silent_for(self, now: float) -> float:
+        """Seconds since the last valid message; infinite before the first one."""
+        return float("inf") if self.last_valid_time is None else now - self.last_valid_time
+
+    def close(self) -> None:
+        return None

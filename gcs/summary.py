@@ -26,7 +26,7 @@ from typing import Any
 from rich.console import Group
 from rich.table import Table
 
-from gcs.runtime import RunResult
+from gcs.flight.core import RunResult
 
 EXIT_COMPLETED, EXIT_ABORTED = 0, 1
 

@@ -61,3 +61,31 @@ def gcs_process() -> Callable[..., Result]:
         return Result(done.returncode, done.stdout, done.stderr)
 
     return run
+
+
+#: Said by the fast tier's guard to a test that needs the `slow` mark.
+NEEDS_SLOW = "starts a process or opens an IP socket: mark it @pytest.mark.slow (tests/conftest.py)"
+
+
+@pytest.fixture(autouse=True)
+def _fast_tier_guard(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`make test-fast` (`-m "not slow"`) runs no process and opens no IP socket: a test that
+    does so without the `slow` mark fails there, naming the mark it needs."""
+    if "not slow" not in (request.config.option.markexpr or ""):
+        return
+    if request.node.get_closest_marker("slow") is not None:
+        return
+    import socket
+
+    def no_process(self, *args, **kwargs):
+        raise RuntimeError(f"{request.node.nodeid} {NEEDS_SLOW}")
+
+    original = socket.socket.__init__
+
+    def no_ip_socket(self, family=-1, *args, **kwargs):
+        if family in (-1, socket.AF_INET, socket.AF_INET6):
+            raise RuntimeError(f"{request.node.nodeid} {NEEDS_SLOW}")
+        original(self, family, *args, **kwargs)
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", no_process)
+    monkeypatch.setattr(socket.socket, "__init__", no_ip_socket)

@@ -27,7 +27,7 @@ import vehicles.cli
 from gcs.link import Link
 from gcs.logreader import read_recording
 from gcs.recording import FlightRecorder
-from gcs.runtime import MissionClock
+from gcs.flight.clock import MissionClock
 from gcs.signing import FleetSigning
 from tests.attacker import codec, mutate, timestamp_now
 from tests.flying import MISSION, Flight, mission_file

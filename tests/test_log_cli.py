@@ -10,7 +10,7 @@ import pytest
 
 from gcs.link import mavutil
 from gcs.recording import FlightRecorder
-from gcs.runtime import MissionClock
+from gcs.flight.clock import MissionClock
 
 
 @pytest.fixture

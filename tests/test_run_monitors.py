@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gcs.monitors import NEAR_HYSTERESIS_M, LinkMonitor, SafetyMonitor
-from gcs.runtime import MissionClock, VehicleClock
+from gcs.flight.clock import MissionClock, VehicleClock
 from planner.obstacles import Obstacles
 
 BOX = np.array([[10.0, -5.0], [20.0, -5.0], [20.0, 5.0], [10.0, 5.0]])
@@ -126,16 +126,32 @@ def test_vehicle_clock_recovers_sample_times_from_delayed_receipts(offset, delay
 
 
 def test_holding_the_mission_clock_back_keeps_mission_and_log_time_continuous():
-    """A stall of 2.5 mission s of which the vehicles flew 1 s: the mission resumes 1 s after
-    the last tick, on the same log time base."""
+    """A stall of 2.5 mission s of which the vehicles flew 1 s: the clock stands still at the
+    last tick while the backlog is read, then resumes 1 s after the last tick, on the same log
+    time base."""
     clock = MissionClock(5.0, monotonic=lambda: 50.0, unix_ns=lambda: 1_000 * 10**9)
     clock.anchor(50.0, 0.0)
     last_tick, resumed = 52.0, 52.5  # wall: 10 s, then 12.5 s of mission time
-    paused_at = clock.mission_time(last_tick) + 1.0
-    clock.hold_back(1.5)
-    assert clock.mission_time(resumed) == pytest.approx(paused_at) == 11.0
+    assert clock.freeze(last_tick) == pytest.approx(10.0)
+    assert clock.mission_time(52.4) == pytest.approx(10.0)  # the backlog is stamped at 10 s
+    assert clock.raw_mission_time(52.4) == pytest.approx(12.0)
+    assert clock.resume(resumed, 11.0) == pytest.approx(11.0)
+    assert clock.mission_time(resumed) == pytest.approx(11.0)
     assert clock.log_time_ns(resumed) == 1_000 * 10**9 + 11 * 10**9  # epoch kept
     assert clock.wall_at(11.0) == pytest.approx(resumed)
+
+
+def test_the_mission_clock_never_runs_backwards():
+    """A resume earlier than where the clock stood holds it there (a pause never rewinds), and
+    a reading for an earlier wall time after a resume never goes below the resume."""
+    clock = MissionClock(2.0, monotonic=lambda: 0.0, unix_ns=lambda: 0)
+    clock.anchor(0.0, 0.0)
+    clock.freeze(10.0)  # stands at 20 s
+    assert clock.resume(15.0, 5.0) == pytest.approx(20.0)
+    assert clock.mission_time(15.0) == pytest.approx(20.0)
+    assert clock.mission_time(12.0) == pytest.approx(20.0)  # a stale wall time
+    readings = [clock.mission_time(15.0 + 0.1 * k) for k in range(20)]
+    assert readings == sorted(readings)
 
 
 def test_a_sample_taken_while_the_mission_paused_maps_to_the_pause():

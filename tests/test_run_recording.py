@@ -21,7 +21,7 @@ from mcap_protobuf.decoder import DecoderFactory
 
 from gcs.link import mavutil
 from gcs.recording import FlightRecorder
-from gcs.runtime import MissionClock
+from gcs.flight.clock import MissionClock
 
 mavlink = mavutil.mavlink
 
@@ -311,7 +311,7 @@ def test_a_killed_writer_leaves_a_file_readable_up_to_the_last_second(tmp_path: 
     script = f"""
 import sys, time
 from gcs.recording import FlightRecorder
-from gcs.runtime import MissionClock
+from gcs.flight.clock import MissionClock
 clock = MissionClock()
 clock.anchor(time.monotonic(), 0.0)
 recorder = FlightRecorder({str(path)!r}, clock)

@@ -46,6 +46,8 @@ class LockstepConfig:
     leader_requests: dict[int, tuple[LeaderRequest, ...]] = field(default_factory=dict)
     control_rate_hz: float = 50.0
     quiet_streams: tuple[int, ...] = QUIET_STREAMS
+    #: (message id, interval in simulated s) of streams sent at another rate than by default
+    stream_intervals: tuple[tuple[int, float], ...] = ()
 
 
 class LockstepFleet:
@@ -73,6 +75,8 @@ class LockstepFleet:
         for autopilot in self.autopilots:
             for msg_id in config.quiet_streams:
                 autopilot.telemetry.set_interval(msg_id, 0.0, 0.0)
+            for msg_id, interval_s in config.stream_intervals:
+                autopilot.telemetry.set_interval(msg_id, interval_s, 0.0)
         self.steps_per_tick = max(1, round(1.0 / (config.control_rate_hz * config.dynamics.step_s)))
         self._steps = 0
 

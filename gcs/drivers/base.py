@@ -57,7 +57,9 @@ What it MAY override (defaults: a plain, well-behaved autopilot)
   for the setpoint stream when `needs_setpoint_stream_before_offboard`).
 * `on_mode_result(mode, outcome, now)`, `on_arm_result(outcome, now)`: a mode change or an
   ARM ended (default: report a refusal with its reason, or a change never shown).
-* `on_mode_changed(previous, now)`: the heartbeat's logical mode changed (failsafes).
+* `on_mode_changed(previous, now)`: the heartbeat's logical mode changed (default: leaving
+  guided flight unasked is a failsafe; `vehicle_mode_phase()` and `describe_mode()` say
+  which phase that is and how the mode is called).
 * `on_family_message(msg, now)`: messages the base does not handle (EKF_STATUS_REPORT, EVENT).
 * `on_heartbeat_sent(now)`: after each GCS heartbeat (periodic family traffic).
 * `on_mission_clock_changed(now)`: the mission clock was held back after a GCS stall.
@@ -84,6 +86,14 @@ from typing import ClassVar
 
 import numpy as np
 
+from fleetwire.messages import (
+    MASK_POSITION_VELOCITY,
+    MASK_POSITION_VELOCITY_ACCELERATION,
+    SPEED_CHANGE_COMMAND,
+    SPEED_CHANGE_FRAME,
+    decode_speed_change,
+    encode_speed_change,
+)
 from gcs.drivers.commands import (
     REASON_SEVERITY,
     Backoff,
@@ -95,7 +105,7 @@ from gcs.drivers.commands import (
     RetryPolicy,
     VehicleTexts,
 )
-from gcs.geodesy import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs.geodesy import Origin, enu_to_geodetic, geodetic_point_to_enu
 from gcs.link import Link, mavutil
 from gcs.speed import SpeedChange
 
@@ -124,14 +134,6 @@ log = logging.getLogger(__name__)
 
 mavlink = mavutil.mavlink
 
-#: type_mask bits of SET_POSITION_TARGET_* (MAVLink POSITION_TARGET_TYPEMASK).
-IGNORE_ACCELERATION = 64 | 128 | 256
-IGNORE_YAW = 1024 | 2048
-#: Position + velocity (CONTRACTS.md: accepted by both real autopilots).
-MASK_POSITION_VELOCITY = IGNORE_ACCELERATION | IGNORE_YAW  # 3520
-#: Position + velocity + acceleration feed-forward.
-MASK_POSITION_VELOCITY_ACCELERATION = IGNORE_YAW  # 3072
-
 #: SYS_STATUS health bit the autopilots set when pre-arm checks pass.
 PREARM_CHECK_BIT = mavlink.MAV_SYS_STATUS_PREARM_CHECK
 
@@ -153,6 +155,9 @@ class Phase(enum.Enum):
     LANDED = "landed"  # on the ground (after a flight, or never took off after land())
     FAILED = "failed"  # see Driver.failure_reason
 
+
+#: Phases in which the vehicle is expected to be in its guided/offboard mode.
+GUIDED_PHASES = frozenset({Phase.TAKING_OFF, Phase.FOLLOWING})
 
 #: Phases in which the vehicle is (or may be) in the air.
 AIRBORNE_PHASES = frozenset({Phase.TAKING_OFF, Phase.FOLLOWING, Phase.HOLDING, Phase.LANDING})
@@ -294,6 +299,7 @@ class Driver(ABC):
             self.retry_policy, self.timing.wall, self._transmit, self.command_ack_is_final,
             self.texts,
         )  # fmt: skip
+        self.failsafes: list[tuple[float, str]] = []  # (wall time, what the vehicle did)
         self.speed_acks: dict[int, float] = {}  # seq -> wall time of its COMMAND_ACK
         self.speed_results: dict[int, int | None] = {}  # seq -> MAV_RESULT (None: unanswered)
         self.setpoints_sent = 0
@@ -365,8 +371,28 @@ class Driver(ABC):
 
     def on_mode_changed(self, previous: FlightMode | None, now: float) -> None:
         """The heartbeat's logical mode changed from `previous` to `current_mode()`; called
-        before the mode goal is checked (`mode_goal` is still what the driver asked for)."""
-        return None
+        before the mode goal is checked (`mode_goal` is still what the driver asked for).
+
+        Leaving guided flight without being asked (no mode goal) while the GCS expects it is a
+        failsafe of the vehicle's own (a GCS, offboard-loss or battery failsafe): a `failsafe`
+        event and the phase of the vehicle's new mode (`vehicle_mode_phase`), so that the
+        ground station sees it at once."""
+        if previous != FlightMode.GUIDED or self.phase not in GUIDED_PHASES:
+            return
+        if self.mode_goal is not None:
+            return  # our own request
+        what = f"the vehicle left guided flight by itself: mode {self.describe_mode()}"
+        self.failsafes.append((now, what))
+        self.emit("failsafe", what, now, mavlink.MAV_SEVERITY_CRITICAL)
+        self.set_phase(self.vehicle_mode_phase(), now, "failsafe")
+
+    def vehicle_mode_phase(self) -> Phase:
+        """The phase to take when the vehicle leaves guided flight by itself."""
+        return Phase.LANDING if self.current_mode() == FlightMode.LAND else Phase.HOLDING
+
+    def describe_mode(self) -> str:
+        """The vehicle's current mode, for messages."""
+        return str(self.telemetry.custom_mode)
 
     def on_mode_result(self, mode: FlightMode, outcome: Outcome, now: float) -> None:
         """A mode request ended; report a refusal (with the vehicle's reason) or a change the
@@ -562,18 +588,10 @@ class Driver(ABC):
         """Broadcast leg for this UAV: COMMAND_INT DO_CHANGE_SPEED (CONTRACTS.md, MAVLink),
         retransmitted until its COMMAND_ACK; the ack time lands in `speed_acks[seq]`."""
         spec = CommandSpec(
-            mavlink.MAV_CMD_DO_CHANGE_SPEED,
-            (
-                1.0,
-                float(change.speed),
-                -1.0,
-                0.0,
-                int(round(change.effective_s * 1000)),
-                change.seq,
-                0.0,
-            ),
+            SPEED_CHANGE_COMMAND,
+            encode_speed_change(change.speed, int(round(change.effective_s * 1000)), change.seq),
             use_int=True,
-            frame=mavlink.MAV_FRAME_MISSION,
+            frame=SPEED_CHANGE_FRAME,
             label=f"speed change {change.seq}",
             retry=Backoff(0.2, growth=1.0, max_s=0.2),  # time-critical: never slower
             max_attempts=None,
@@ -981,7 +999,7 @@ class Driver(ABC):
             self.refuse_position("reported position (GLOBAL_POSITION_INT)", now)
             return
         t = self.telemetry
-        t.position_enu = geodetic_to_enu(
+        t.position_enu = geodetic_point_to_enu(
             msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, self.spec.origin
         )
         t.velocity_enu = np.array([msg.vy, msg.vx, -msg.vz], float) * 0.01
@@ -998,14 +1016,14 @@ class Driver(ABC):
             self.refuse_position("true position (SIM_STATE)", now)
             return
         t = self.telemetry
-        t.true_position_enu = geodetic_to_enu(lat, lon, msg.alt, self.spec.origin)
+        t.true_position_enu = geodetic_point_to_enu(lat, lon, msg.alt, self.spec.origin)
         t.true_velocity_enu = np.array([msg.ve, msg.vn, -msg.vd], float)
         t.true_time = now
         t.true_vehicle_time_s = t.vehicle_time_s  # SIM_STATE has no time: its tick's
         t.navigation_noise_m = float(msg.std_dev_horz)
 
     def _on_home_position(self, msg, now: float) -> None:
-        self.telemetry.home_enu = geodetic_to_enu(
+        self.telemetry.home_enu = geodetic_point_to_enu(
             msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3, self.spec.origin
         )
 
@@ -1030,17 +1048,18 @@ class Driver(ABC):
         """A command sent TO the ground station: a leader's speed request (CONTRACTS.md)."""
         if msg.target_system not in (0, self.link.mav.srcSystem):
             return
-        if msg.command != mavlink.MAV_CMD_DO_CHANGE_SPEED:
+        change = decode_speed_change(msg)
+        if change is None:
             result = mavlink.MAV_RESULT_UNSUPPORTED
         else:
             result = mavlink.MAV_RESULT_ACCEPTED
-            seq = int(msg.y) if msg.get_type() == "COMMAND_INT" else None
+            seq = change.seq  # None: COMMAND_LONG, never deduplicated
             if seq is None or seq not in self._leader_seqs:
                 if seq is not None:
                     self._leader_seqs.add(seq)
-                request = LeaderRequest(self.uav_id, seq, float(msg.param2), now)
+                request = LeaderRequest(self.uav_id, seq, change.speed, now)
                 self._leader_requests.append(request)
-                self.emit("leader_request", f"leader asks for {msg.param2:g} m/s", now)
+                self.emit("leader_request", f"leader asks for {change.speed:g} m/s", now)
         seq = int(msg.y) if msg.get_type() == "COMMAND_INT" else 0
         ack = self.link.mav.command_ack_encode(
             msg.command, result, 0, seq, msg.get_srcSystem(), msg.get_srcComponent()

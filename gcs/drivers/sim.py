@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fleetwire.messages import MISSION_TIME_NAME, encode_mission_time
+from fleetwire.modes import COPTER_MODE
 from gcs.drivers.base import CommandSpec, Driver, Fleet, FleetProblem, FlightMode
 from gcs.geodesy import Origin
 from gcs.link import mavutil
@@ -31,10 +33,12 @@ log = logging.getLogger(__name__)
 mavlink = mavutil.mavlink
 
 #: ArduCopter custom modes the simulated vehicles implement (see ../shared/sitl/README.md).
-COPTER_MODES = {FlightMode.GUIDED: 4, FlightMode.HOLD: 5, FlightMode.LAND: 9}
+COPTER_MODES = {
+    FlightMode.GUIDED: COPTER_MODE["GUIDED"],
+    FlightMode.HOLD: COPTER_MODE["LOITER"],
+    FlightMode.LAND: COPTER_MODE["LAND"],
+}
 _MODE_OF_NUMBER = {number: mode for mode, number in COPTER_MODES.items()}
-#: NAMED_VALUE_INT name carrying the GCS's mission time to the simulated vehicles.
-MISSION_TIME_NAME = b"MSN_TIME"
 
 
 class SimDriver(Driver):
@@ -70,7 +74,7 @@ class SimDriver(Driver):
         if mission_time is None:
             return
         msg = self.link.mav.named_value_int_encode(
-            self.time_boot_ms(now), MISSION_TIME_NAME, int(round(mission_time * 1000))
+            self.time_boot_ms(now), MISSION_TIME_NAME, encode_mission_time(mission_time)
         )
         self.link.send(msg, now)
 

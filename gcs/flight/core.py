@@ -1,7 +1,19 @@
-"""Flying a planned mission: the mission clock and the ONE scheduler loop of the whole fleet.
+"""The ground-station core: all the flight policy of one mission, with no socket and no clock.
 
-The loop waits on every UAV link at once (`selectors`) until the next tick, hands what arrived
-to the drivers, and at each tick (the mission's setpoint rate in mission time):
+The loop that drives it passes its time `now` (the live loop's monotonic wall clock, the fast
+mode's simulated seconds) and what arrived, and the core answers through its drivers (which
+write to the links they were given) and its recorder. Two loops drive this one core:
+`gcs.flight.live` (selectors over UDP links, the wall clock) and `gcs.fastsim` (the lockstep
+vehicles and radio medium in process, in-memory links). The loop calls, in order:
+
+* `receive(now, batches)`: every valid message read from each UAV's link (a stall of the loop
+  is noticed here: see below); `fleet_reports(...)`, `operator_request(...)` and
+  `operator_command(...)` for what its processes, socket and terminal delivered;
+* `connect_step(now, started)` until every UAV is ready (the mission clock is then anchored),
+* then `tick(now)` at the mission's setpoint rate (in mission time) until `finished(now)`;
+* `result()`: the run's `RunResult`.
+
+At each tick the core:
 
 1. turns speed requests (schedule, operator, leader, Ctrl-C, link loss) into time-stamped
    changes of the formation's speed profile, broadcast to every UAV (DESIGN 4);
@@ -11,13 +23,13 @@ to the drivers, and at each tick (the mission's setpoint rate in mission time):
    velocity, acceleration; DESIGN 3.5), converted for the whole fleet at once;
 4. steps the drivers (handshakes, retransmissions), runs the monitors, records.
 
-There is no other thread: if this loop stalls, the setpoints stop and the vehicles' own
-failsafes see it; once it runs again it pauses the mission where the UAVs stopped (the mission
-clock is held back, `_resume_after_stall`), so that they are not asked to catch up. Mission
-time 0 is when the formation starts moving; the clock is anchored once every UAV is ready, so
-that UAV 1 (which leaves at t = 0) takes off at -lead. With
-`speedup` K the mission clock runs K times faster than the wall clock; every wall delay keeps
-a floor (`DriverTiming`).
+If the loop stalls, the setpoints stop and the vehicles' own failsafes see it; once it runs
+again the mission clock stands still while the backlog is read, then the mission resumes where
+the UAVs stopped (`_resume_after_stall`), so that they are not asked to catch up: the mission
+clock never runs backwards and never counts time the formation was not flown. Mission time 0
+is when the formation starts moving; the clock is anchored once every UAV is ready, so that
+UAV 1 (which leaves at t = 0) takes off at -lead. With `speedup` K the mission clock runs K
+times faster than the loop's clock; every delay keeps a floor (`DriverTiming`).
 
 A UAV that is not airborne shortly before its departure freezes the formation (speed 0) until
 it is: the virtual targets never leave a UAV behind. A lost link freezes the formation too;
@@ -29,22 +41,19 @@ from __future__ import annotations
 
 import logging
 import math
-import selectors
-import time
-from collections import deque
-from collections.abc import Callable
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
-from gcs.drivers.base import Driver, DriverEvent, Fleet, Phase
+from gcs.drivers.base import Driver, DriverEvent, Phase
+from gcs.flight.clock import MissionClock, VehicleClock, paused
 from gcs.geodesy import enu_to_geodetic
 from gcs.link import mavutil
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
 from gcs.radio import run_json_radio
 from gcs.speed import (
-    OperatorSocket,
     ScheduledChange,
     SpeedChange,
     SpeedChanges,
@@ -52,6 +61,7 @@ from gcs.speed import (
     SpeedRefused,
 )
 from planner.kinematics import (
+    Reference,
     SpeedProfile,
     recommended_window,
     smoothed_reference,
@@ -87,51 +97,6 @@ STILL_BEFORE_LANDING_S = 0.5
 SETTLE_WALL_S = 3.0
 
 
-class MissionClock:
-    """Mission time from the wall clock: `mission = (wall - wall_at_zero) * speedup`.
-
-    Anchored once (`anchor`); `log_time_ns` is the Unix time (ns) at mission time 0 plus the
-    mission time, the recording's time base (CONTRACTS.md, MCAP).
-    """
-
-    def __init__(
-        self,
-        speedup: float = 1.0,
-        monotonic: Callable[[], float] = time.monotonic,
-        unix_ns: Callable[[], int] = time.time_ns,
-    ) -> None:
-        self.speedup = float(speedup)
-        self._monotonic = monotonic
-        self._unix_ns = unix_ns
-        self._zero_wall: float | None = None
-        self.epoch_ns: int | None = None  # Unix ns at mission time 0
-
-    @property
-    def anchored(self) -> bool:
-        return self._zero_wall is not None
-
-    def anchor(self, wall: float, mission_time: float) -> None:
-        """Fix the clock so that `mission_time(wall) == mission_time`."""
-        self._zero_wall = wall - mission_time / self.speedup
-        offset_ns = self._unix_ns() - int(self._monotonic() * 1e9)
-        self.epoch_ns = offset_ns + int(self._zero_wall * 1e9)
-
-    def mission_time(self, wall: float) -> float:
-        return (wall - self._zero_wall) * self.speedup
-
-    def wall_at(self, mission_time: float) -> float:
-        return self._zero_wall + mission_time / self.speedup
-
-    def hold_back(self, mission_seconds: float) -> None:
-        """Pause the mission for `mission_seconds` that already passed on the wall clock (a
-        stall the vehicles did not fly through): mission time stays continuous and monotonic,
-        and the epoch is kept, so log times stay on the one time base (CONTRACTS.md, MCAP)."""
-        self._zero_wall += mission_seconds / self.speedup
-
-    def log_time_ns(self, wall: float) -> int:
-        return self.epoch_ns + int(round(self.mission_time(wall) * 1e9))
-
-
 @dataclass(frozen=True)
 class RunOptions:
     """How to fly (command-line options of `gcs mission run`)."""
@@ -163,6 +128,19 @@ class UavTrack:
     last_velocity: np.ndarray | None = None
     last_sample_time: float | None = None  # mission time of the last position
     final_xy: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Stall:
+    """A stall of the loop: from `since` to `until` (the loop's time) nothing ran; the mission
+    clock stood at `stood_at` and resumed from `resumed_at` (never earlier), `held_back_s`
+    mission seconds behind where it would have been."""
+
+    since: float
+    until: float
+    stood_at: float
+    resumed_at: float
+    held_back_s: float
 
 
 @dataclass
@@ -197,52 +175,10 @@ class RunResult:
     radio: dict | None = None  # the radio medium's run JSON `radio` object, if one ran
 
 
-def _paused(t: float, at: float, length: float) -> float:
-    """Mission time `t` (as the clock read before it was held back by `length` at `at`) as it
-    reads after: unchanged before the pause, the pause itself during it, `length` earlier after
-    it."""
-    return min(t, max(t - length, at))
-
-
-class VehicleClock:
-    """Maps one vehicle's clock (time_boot_ms) to mission time, so that samples keep the time
-    they were taken even when the ground station read them late (a busy machine, a stall).
-
-    offset = min over recent samples of (mission time at receipt - vehicle time): the least
-    delayed sample bounds the offset best. Both clocks run at the same speedup. A vehicle clock
-    that goes backwards (a reboot) starts the estimate over. After the mission clock was held
-    back (`pause`), a sample taken while the mission stood still maps to the instant it paused.
-    """
-
-    def __init__(self, window: int = 50) -> None:
-        self._offsets: deque[float] = deque(maxlen=window)
-        self._last: float | None = None
-        self._pause: tuple[float, float] | None = None  # (mission time it paused at, length)
-
-    def pause(self, at: float, length: float) -> None:
-        """The mission clock stood still at mission time `at` for `length` vehicle seconds."""
-        self._offsets = deque((o - length for o in self._offsets), maxlen=self._offsets.maxlen)
-        self._pause = (at, length)
-
-    def mission_time(self, vehicle_s: float | None, received_s: float) -> float:
-        if vehicle_s is None:
-            return received_s
-        if self._last is not None and vehicle_s < self._last:
-            self._offsets.clear()
-            self._pause = None
-        self._last = vehicle_s
-        self._offsets.append(received_s - vehicle_s)
-        mapped = vehicle_s + min(self._offsets)
-        if self._pause is not None:
-            at, length = self._pause
-            mapped = _paused(mapped + length, at, length)  # the offsets are after the pause
-        return min(mapped, received_s)
-
-
 class View(Protocol):
     """The live view (or nothing): shown while flying, and a source of operator commands."""
 
-    def update(self, run: MissionRun, now: float) -> None: ...
+    def update(self, run: GroundStation, now: float) -> None: ...
 
     def commands(self) -> list[str]: ...
 
@@ -250,7 +186,7 @@ class View(Protocol):
 
 
 class _NoView:
-    def update(self, run: MissionRun, now: float) -> None:
+    def update(self, run: GroundStation, now: float) -> None:
         return None
 
     def commands(self) -> list[str]:
@@ -279,8 +215,52 @@ class Recorder(Protocol):
 
     def event(self, level: str, message: str, wall: float, name: str = "gcs") -> None: ...
 
+    def radio(self, payload: dict, wall: float) -> None: ...
 
-class MissionRun:
+
+@dataclass(frozen=True, eq=False)
+class _Evaluation:
+    """The formation evaluated once per tick: at the tick (row 0) and at each position sample
+    received since the last tick (rows 1..): `samples` (UAV index, t, xyz, true?), `times`
+    (1+S,), `distances` S(t) (1+S,), `virtual` V_n(t) (1+S, N, 2), `reference` the smoothed
+    reference with its feed-forward."""
+
+    samples: list[tuple[int, float, np.ndarray, bool]]
+    times: np.ndarray
+    distances: np.ndarray
+    virtual: np.ndarray
+    reference: Reference
+
+
+class NullRecorder:
+    """Records nothing (the fast mode keeps its own time series)."""
+
+    def setpoint(self, uav: int, payload: dict, wall: float) -> None:
+        return None
+
+    def state(self, uav: int, payload: dict, wall: float) -> None:
+        return None
+
+    def speed(self, payload: dict, wall: float) -> None:
+        return None
+
+    def metrics(self, payload: dict, wall: float) -> None:
+        return None
+
+    def radio(self, payload: dict, wall: float) -> None:
+        return None
+
+    def fix(self, uav: int, lat: float, lon: float, alt: float, wall: float) -> None:
+        return None
+
+    def fleet(self, t: float, positions, targets, wall: float) -> None:
+        return None
+
+    def event(self, level: str, message: str, wall: float, name: str = "gcs") -> None:
+        return None
+
+
+class GroundStation:
     """One flight of a planned mission (see the module docstring)."""
 
     def __init__(
@@ -291,10 +271,7 @@ class MissionRun:
         recorder: Recorder,
         options: RunOptions,
         *,
-        fleet: Fleet | None = None,
-        operator: OperatorSocket | None = None,
         view: View | None = None,
-        monotonic: Callable[[], float] = time.monotonic,
     ) -> None:
         mission = plan.mission
         self.plan = plan
@@ -304,10 +281,7 @@ class MissionRun:
         self.clock = clock
         self.recorder = recorder
         self.options = options
-        self.fleet = fleet
-        self.operator = operator
         self.view = view or _NoView()
-        self._monotonic = monotonic
         size = self.formation.fleet_size
         self.size = size
         self.tracks = [UavTrack() for _ in range(size)]
@@ -340,18 +314,18 @@ class MissionRun:
         self.frozen_by: str | None = None  # "link" | "operator" | "takeoff" | None
         self._resume_speed: float | None = None
         self._link_deadline: float | None = None
+        self._rejoining: set[int] = set()  # UAVs lost, to be back on their targets
         self.interrupts = 0
         self._handled_interrupts = 0
         self._samples: list[tuple[int, float, np.ndarray, bool]] = []  # uav, t, xyz, true?
         self._tick_walls: list[float] = []
-        self.tick_work: list[float] = []  # wall seconds each flight tick took
         self._last_metrics: float | None = None
-        self._last_view = -math.inf
         self._abort_time: float | None = None
         self._settle_deadline: float | None = None
         self.ticks = 0
         self.radio_report: dict | None = None  # the radio medium's last report
-        self._last_awake: float | None = None  # wall: the loop last ran (a tick or a receive)
+        self._last_awake: float | None = None  # the loop last woke (a tick or a receive)
+        self.stalls: list[Stall] = []
         self.current_speed = plan.speeds.initial
         self.tracking_now = np.full(size, np.nan)
         self.mission_time = None
@@ -373,34 +347,24 @@ class MissionRun:
         return float(smoothing_error_bound(self.formation, self.profile, self.window_s))
 
     def interrupt(self) -> None:
-        """Ctrl-C (from a signal handler: only counts; the loop acts on it)."""
+        """Ctrl-C (from a signal handler: only counts; the next tick acts on it)."""
         self.interrupts += 1
 
-    def run(self) -> RunResult:
-        """Connect, fly, land; return the result. The caller owns links, fleet and recorder."""
-        selector = self._selector()
-        try:
-            if self._connect(selector):
-                self._fly(selector)
-        finally:
-            selector.close()
-        return self._result()
-
-    def request_speed(self, speed: float, source: str, at: float | None = None) -> SpeedChange:
+    def request_speed(
+        self, speed: float, source: str, now: float, at: float | None = None
+    ) -> SpeedChange:
         """A speed change from the operator or the runtime; raises `SpeedRefused`."""
-        now = self._monotonic()
         t = self.clock.mission_time(now) if self.clock.anchored else 0.0
         change = self.speeds.request(speed, t, source, at)
         self._apply(change, now)
         return change
 
-    def land_everyone(self, reason: str) -> None:
+    def land_everyone(self, reason: str, now: float) -> None:
         """Abort: every UAV lands where it is; the run ends with exit status 1."""
         if self.aborting:
             return
         self.aborting = True
         self.reason = self.reason or reason
-        now = self._monotonic()
         self._abort_time = self.clock.mission_time(now) if self.clock.anchored else 0.0
         self._event(
             MonitorEvent(self._abort_time, "error", "abort", f"landing everyone: {reason}"), now
@@ -408,33 +372,27 @@ class MissionRun:
         for driver in self.drivers:
             driver.land(now)
 
-    # ------------------------------------------------------------------ phases
-    def _connect(self, selector) -> bool:
-        """Step the handshakes until every UAV is ready; anchor the mission clock."""
-        began = self._monotonic()
-        period = 0.02
-        while True:
-            now = self._monotonic()
-            self._receive(selector, period)
-            now = self._monotonic()
-            for driver in self.drivers:
-                driver.step(now)
-            self._drain_driver_events(now)
-            self._poll_fleet(now)
-            self.view.update(self, now)
-            if self.interrupts:
-                self.reason = "interrupted while connecting"
-                return False
-            failed = [d for d in self.drivers if d.phase == Phase.FAILED]
-            if failed:
-                self.reason = f"UAV {failed[0].uav_id}: {failed[0].failure_reason}"
-                self.fatal = True
-                return False
-            if self.aborting:
-                return False
-            if all(d.phase == Phase.READY for d in self.drivers):
-                break
-            if now - began > self.options.connect_timeout_s:
+    # ------------------------------------------------------------------ what the loop calls
+    def connect_step(self, now: float, started: float) -> bool | None:
+        """One step of the handshakes (the loop calls it after handing over what arrived):
+        True once every UAV is ready (the mission clock is then anchored), False if connecting
+        failed (`reason` says why), None while still connecting. `started`: when the loop
+        began connecting."""
+        for driver in self.drivers:
+            driver.step(now)
+        self._drain_driver_events(now)
+        if self.interrupts:
+            self.reason = "interrupted while connecting"
+            return False
+        failed = [d for d in self.drivers if d.phase == Phase.FAILED]
+        if failed:
+            self.reason = f"UAV {failed[0].uav_id}: {failed[0].failure_reason}"
+            self.fatal = True
+            return False
+        if self.aborting:
+            return False
+        if not all(d.phase == Phase.READY for d in self.drivers):
+            if now - started > self.options.connect_timeout_s:
                 waiting = [d for d in self.drivers if d.phase != Phase.READY]
                 self.reason = (
                     f"UAV {waiting[0].uav_id} not ready after "
@@ -442,7 +400,7 @@ class MissionRun:
                 )
                 self.fatal = True
                 return False
-        now = self._monotonic()
+            return None
         self.clock.anchor(now, -self.takeoff_lead_s())
         bound, budget = self.smoothing_bound(), self.mission.error_budget
         if bound > budget:
@@ -460,84 +418,104 @@ class MissionRun:
             driver.step(now)
         return True
 
-    def fly(self, until: Callable[[float], bool] | None = None) -> None:
-        """The flight loop alone, on an anchored clock (benchmarks): tick until every UAV has
-        landed or `until(wall)` says stop."""
-        selector = self._selector()
-        try:
-            self._fly(selector, until)
-        finally:
-            selector.close()
+    def receive(self, now: float, batches: Iterable[tuple[int, list, float]]) -> None:
+        """The loop woke up at `now` and hands over what arrived: (UAV index, valid messages,
+        time they were read) per link; `batches` may be lazy (read as it is iterated).
 
-    def _selector(self) -> selectors.BaseSelector:
-        """select(2) wakes up to the microsecond (epoll and poll round to milliseconds, which is
-        a millisecond of setpoint jitter); epoll beyond select's descriptor limit."""
-        if len(self.drivers) < 500:
-            selector = selectors.SelectSelector()
-        else:  # pragma: no cover - very large fleets
-            selector = selectors.DefaultSelector()
-        for index, driver in enumerate(self.drivers):
-            selector.register(driver.link.fileno(), selectors.EVENT_READ, index)
-        return selector
-
-    def _fly(self, selector, until: Callable[[float], bool] | None = None) -> None:
-        period = self.tick_period_wall
-        next_tick = self._monotonic()
-        while True:
-            now = self._monotonic()
-            self._receive(selector, max(0.0, next_tick - now))
-            now = self._monotonic()
-            if now < next_tick:
-                continue
-            self._tick(now)
-            self.tick_work.append(self._monotonic() - now)
-            next_tick += period
-            if next_tick < now:  # overrun: do not burst to catch up
-                next_tick = now + period
-            if self._finished(now) or (until is not None and until(now)):
-                return
-
-    def _receive(self, selector, timeout: float) -> None:
-        ready = selector.select(timeout)
-        stalled_since = self._stalled_since(self._monotonic())
-        for key, _ in ready:
-            index = key.data
+        A wake-up long after the previous one is a stall of the ground station (the process
+        was stopped or starved of CPU for a setpoint timeout of mission time): the mission clock
+        stands still at the last instant the loop ran while the backlog is read, then resumes
+        where the formation stands (`_resume_after_stall`)."""
+        stalled_since = self._stalled_since(now)
+        if stalled_since is not None:
+            self.clock.freeze(stalled_since)
+        for index, messages, received in batches:
             driver = self.drivers[index]
-            now = self._monotonic()
-            for msg in driver.link.receive(now):
-                driver.on_message(msg, now)
+            for msg in messages:
+                driver.on_message(msg, received)
                 kind = msg.get_type()
                 if kind == "GLOBAL_POSITION_INT":
-                    self._on_reported_position(driver, msg, now)
+                    self._on_reported_position(driver, msg, received)
                 if kind == "SIM_STATE" or (
                     kind == "GLOBAL_POSITION_INT" and driver.telemetry.true_time is None
                 ):
-                    self._on_position(index, driver, kind == "SIM_STATE", now)
+                    self._on_position(index, driver, kind == "SIM_STATE", received)
         if stalled_since is not None:
-            self._resume_after_stall(stalled_since, self._monotonic())
+            self._resume_after_stall(stalled_since, now)
 
-    # ------------------------------------------------------------------ the tick
-    def _tick(self, now: float) -> None:
+    def fleet_reports(self, now: float, problems: Iterable, radio_reports: Iterable[dict]) -> None:
+        """What the fleet's processes reported: problems (`FleetProblem`: a vehicle process
+        exited) and the radio medium's reports."""
+        for report in radio_reports:
+            self.radio_report = report
+            if self.clock.anchored:
+                self.recorder.radio({**report, "t": self.clock.mission_time(now)}, now)
+        for problem in problems:
+            t = self.clock.mission_time(now) if self.clock.anchored else 0.0
+            if not self.clock.anchored or not problem.uavs:
+                self._event(MonitorEvent(t, "error", "vehicle_exit", problem.text, fatal=True), now)
+                if not self.clock.anchored:
+                    self.aborting = True
+                continue
+            for uav in problem.uavs:
+                silent = self.drivers[uav - 1].link.silent_for(now)
+                for event in self.links.mark_lost(t, uav - 1, problem.text, silent):
+                    self._event(event, now)
+
+    def operator_request(
+        self, speed: float | None, at: float | None, error: str | None, now: float
+    ) -> dict:
+        """A request of `gcs speed` (the operator socket); returns the answer to send back."""
+        if error:
+            return {"ok": False, "reason": error}
+        if self.aborting:
+            return {"ok": False, "reason": f"the fleet is landing ({self.reason})"}
+        t = self.clock.mission_time(now) if self.clock.anchored else 0.0
+        try:
+            change = self.speeds.request(speed, t, "operator", at)
+        except SpeedRefused as refused:
+            return {"ok": False, "reason": str(refused)}
+        self._apply(change, now)
+        return {
+            "ok": True,
+            "seq": change.seq,
+            "effective_s": change.effective_s,
+            "speed": change.speed,
+        }
+
+    def operator_command(self, line: str, now: float) -> None:
+        """A line typed in the live view: a speed (m/s) [@T], or 'land'."""
+        if self.clock.anchored and not self.aborting:
+            self._operator_command(line, self.clock.mission_time(now), now)
+
+    def tick(self, now: float) -> None:
+        """One tick of the flight (the mission's setpoint rate): requests, take-offs and
+        landings, setpoints, drivers, acks, monitors, the link policy."""
         self.ticks += 1
         t = self.clock.mission_time(now)
         self.mission_time = t
         self._handle_interrupts(now)
         self._handle_requests(t, now)
         self._schedule_uavs(t, now)
-        self._stream(t, now)
+        evaluation = self._evaluate(t)
+        self._stream(t, now, evaluation)
         for driver in self.drivers:
             driver.step(now)
         self._collect_acks(now)
         self._drain_driver_events(now)
-        self._poll_fleet(now)
-        self._monitor(t, now)
+        self._monitor(t, now, evaluation)
         self._link_policy(t, now)
-        if now - self._last_view >= 0.2:
-            self._last_view = now
-            self.view.update(self, now)
 
+    def finished(self, now: float) -> bool:
+        """Every UAV is down (or given up on) and settled: the run is over."""
+        return self._finished(now)
+
+    def result(self) -> RunResult:
+        return self._result()
+
+    # ------------------------------------------------------------------ stalls
     def _stalled_since(self, now: float) -> float | None:
-        """The wall time the loop last ran, if it stalled since (the process was stopped or
+        """The time the loop last woke, if it stalled since (the process was stopped or
         starved of CPU for a setpoint timeout of mission time); else None."""
         last, self._last_awake = self._last_awake, now
         if last is None or not self.clock.anchored:
@@ -548,33 +526,33 @@ class MissionRun:
         return last
 
     def _resume_after_stall(self, last: float, now: float) -> None:
-        """No setpoint went out from wall time `last` to `now`: each vehicle flew on by itself
-        (its own setpoint timeout: carry the last setpoint forward, brake, hold) and the
-        telemetry that queued meanwhile has just been read. The mission pauses where the
-        formation stands: the mission clock is held back to the instant whose virtual targets
-        best match the UAVs' latest positions (`_where_the_formation_stands`), the vehicles'
-        clocks are told at once, and the samples taken after that instant map to it. The
-        formation then resumes from where the UAVs are instead of chasing targets that ran on
-        without them. (Records written while the queue was read keep the later log time they
-        were stamped with.)"""
-        t_last, t_now = self.clock.mission_time(last), self.clock.mission_time(now)
+        """No setpoint went out from `last` to `now`: each vehicle flew on by itself (its own
+        setpoint timeout: carry the last setpoint forward, brake, hold) and the telemetry that
+        queued meanwhile has just been read, on a clock frozen at `last`. The mission resumes
+        where the formation stands: at the instant in [t_last, t_now] whose virtual targets best
+        match the following UAVs' latest positions (`_where_the_formation_stands`); at t_last
+        itself when no UAV was following the formation (nothing flew it meanwhile). The mission
+        time never runs backwards: the pause holds it, it never rewinds. The vehicles' clocks
+        are told at once, and the samples taken after that instant map to it."""
+        t_last = self.clock.mission_time(last)  # frozen there
+        t_now = self.clock.raw_mission_time(now)
         paused_at = self._where_the_formation_stands(t_last, t_now)
         held_back = t_now - paused_at
+        self.clock.resume(now, paused_at)
         text = (
             f"GCS scheduler stalled {now - last:.2f} s ({t_now - t_last:.1f} s of mission "
             "time): no setpoints meanwhile, the vehicles flew on their own failsafe; "
         )
         if held_back > 1e-3:
-            self.clock.hold_back(held_back)
             for clock in self._vehicle_clocks:
                 clock.pause(paused_at, held_back)
             self._samples = [
-                (uav, _paused(t, paused_at, held_back), xyz, truth)
+                (uav, paused(t, paused_at, held_back), xyz, truth)
                 for uav, t, xyz, truth in self._samples
             ]
             for track in self.tracks:
                 if track.last_sample_time is not None:
-                    track.last_sample_time = _paused(track.last_sample_time, paused_at, held_back)
+                    track.last_sample_time = paused(track.last_sample_time, paused_at, held_back)
             for driver in self.drivers:
                 driver.on_mission_clock_changed(now)
             text += (
@@ -583,12 +561,14 @@ class MissionRun:
             )
         else:
             text += "they kept up with the formation"
+        self.stalls.append(Stall(last, now, t_last, paused_at, held_back))
         self._event(MonitorEvent(paused_at, "warning", "stall", text), now)
 
     def _where_the_formation_stands(self, t_from: float, t_to: float) -> float:
         """The mission time in [t_from, t_to] whose virtual targets are nearest to the following
         UAVs' latest positions (the least worst distance: the tracking error the monitor bounds);
-        `t_to` if none is following or the formation did not move."""
+        `t_from` if none is following (neither the formation nor the take-offs went on
+        meanwhile), `t_to` if the formation did not move (frozen: nothing to hold back)."""
         following = [
             i
             for i, driver in enumerate(self.drivers)
@@ -597,7 +577,9 @@ class MissionRun:
         count = int(np.clip(math.ceil((t_to - t_from) / 0.02) + 1, 2, 5001))
         times = np.linspace(t_from, t_to, count)
         distances = self.profile.distance(times)
-        if not following or distances[-1] - distances[0] < 1e-6:
+        if not following:
+            return t_from
+        if distances[-1] - distances[0] < 1e-6:
             return t_to
         virtual = self.formation.positions(distances)[:, following]  # (count, k, 2)
         positions = np.array([self.tracks[i].last_position[:2] for i in following])
@@ -621,46 +603,40 @@ class MissionRun:
                 self.reason = "interrupted by the operator"
                 self._freeze("operator", now)
             else:
-                self.land_everyone("interrupted by the operator (Ctrl-C twice)")
+                self.land_everyone("interrupted by the operator (Ctrl-C twice)", now)
 
     def _handle_requests(self, t: float, now: float) -> None:
         if self.aborting:
             return
         for scheduled in self.speeds.due(t):
-            self._issue(
-                scheduled.speed, t, "schedule", now, at=max(scheduled.at, self.speeds.earliest(t))
-            )
+            if not self._deferred(scheduled.speed, t, "schedule", now):
+                at = max(scheduled.at, self.speeds.earliest(t))
+                self._issue(scheduled.speed, t, "schedule", now, at=at)
         for driver in self.drivers:
             for request in driver.drain_leader_requests():
-                self._issue(request.speed, t, f"leader:{request.uav_id}", now)
-        if self.operator is not None:
-            for request in self.operator.poll():
-                if request.error:
-                    request.reply({"ok": False, "reason": request.error})
-                    continue
-                try:
-                    change = self.speeds.request(request.speed, t, "operator", request.at)
-                except SpeedRefused as refused:
-                    request.reply({"ok": False, "reason": str(refused)})
-                    continue
-                self._apply(change, now)
-                request.reply(
-                    {
-                        "ok": True,
-                        "seq": change.seq,
-                        "effective_s": change.effective_s,
-                        "speed": change.speed,
-                    }
-                )
-        for line in self.view.commands():
-            self._operator_command(line, t, now)
+                source = f"leader:{request.uav_id}"
+                if not self._deferred(request.speed, t, source, now):
+                    self._issue(request.speed, t, source, now)
+
+    def _deferred(self, speed: float, t: float, source: str, now: float) -> bool:
+        """While the formation is frozen, a scheduled or leader change is not flown: it becomes
+        the speed the formation resumes with (only the operator unfreezes it)."""
+        if self.frozen_by is None:
+            return False
+        self._resume_speed = speed
+        text = (
+            f"{source}: {speed:g} m/s deferred, the formation is frozen ({self.frozen_by}); "
+            "it resumes at that speed"
+        )
+        self._event(MonitorEvent(t, "warning", "speed_deferred", text), now)
+        return True
 
     def _operator_command(self, line: str, t: float, now: float) -> None:
         words = line.strip().lower().split()
         if not words:
             return
         if words[0] == "land":
-            self.land_everyone("the operator asked everyone to land")
+            self.land_everyone("the operator asked everyone to land", now)
             return
         try:
             speed = float(words[0])
@@ -725,7 +701,7 @@ class MissionRun:
 
     def _resume(self, now: float) -> None:
         t = self.clock.mission_time(now)
-        speed = self._resume_speed if self._resume_speed else self.plan.speeds.initial
+        speed = self._resume_speed if self._resume_speed is not None else self.plan.speeds.initial
         self.frozen_by = None
         self._issue(speed, t, "resume", now)
 
@@ -780,14 +756,29 @@ class MissionRun:
         slot = self.formation.goal_slots[index]
         return float(np.hypot(*(track.last_position[:2] - slot)))
 
-    def _stream(self, t: float, now: float) -> None:
+    def _evaluate(self, t: float) -> _Evaluation:
+        """The formation at the tick and at the samples that arrived since the last one, in
+        one vectorised evaluation (the profile is final for these instants: a change always
+        takes effect later than half the smoothing window ahead)."""
+        samples, self._samples = self._samples, []
+        times = np.array([t] + [sample[1] for sample in samples])
+        distances = self.profile.distance(times)
+        return _Evaluation(
+            samples,
+            times,
+            distances,
+            self.formation.positions(distances),
+            smoothed_reference(self.formation, self.profile, times, self.window_s),
+        )
+
+    def _stream(self, t: float, now: float, evaluation: _Evaluation) -> None:
         streaming = [
             i for i, d in enumerate(self.drivers) if d.wants_setpoints and not self.aborting
         ]
         if not streaming:
             return
         self._tick_walls.append(now)
-        reference = smoothed_reference(self.formation, self.profile, [t], self.window_s)
+        reference = evaluation.reference
         idx = np.array(streaming)
         xy = reference.positions[0, idx]
         vxy = reference.velocities[0, idx]
@@ -795,9 +786,9 @@ class MissionRun:
         count = len(idx)
         up = np.full(count, float(self.altitude))
         geodetic = enu_to_geodetic(xy[:, 0], xy[:, 1], up, self.mission.origin).reshape(count, 3)
-        virtual = self.formation.positions(self.profile.distance(t))[idx]
+        virtual = evaluation.virtual[0, idx]
         speed = float(self.profile.speed_at(t))
-        distance = float(self.profile.distance(t))
+        distance = float(evaluation.distances[0])
         self.current_speed = float(self.profile.speed_at(max(t, 0.0)))  # commanded, for the view
         zero = np.zeros(count)
         position = np.column_stack([xy, up])
@@ -846,7 +837,10 @@ class MissionRun:
         track.last_position = position
         track.last_velocity = velocity
         if self.clock.anchored:
-            t = self._vehicle_clocks[index].mission_time(vehicle_s, self.clock.mission_time(now))
+            # the raw time: while a stall is being resolved the clock stands still, but the
+            # samples keep the time they were taken (mapped onto the pause afterwards)
+            received = self.clock.raw_mission_time(now)
+            t = self._vehicle_clocks[index].mission_time(vehicle_s, received)
             track.last_sample_time = t
             self._samples.append((index, t, position.copy(), truth))
         else:
@@ -865,23 +859,23 @@ class MissionRun:
                 now,
             )
 
-    def _monitor(self, t: float, now: float) -> None:
+    def _monitor(self, t: float, now: float, evaluation: _Evaluation) -> None:
         events: list[MonitorEvent] = []
-        if self._samples:
-            uavs = np.array([s[0] for s in self._samples])
-            times = np.array([s[1] for s in self._samples])
-            sampled = np.array([s[2] for s in self._samples])
+        samples = evaluation.samples
+        if samples:
+            uavs = np.array([s[0] for s in samples])
+            times = evaluation.times[1:]
+            sampled = np.array([s[2] for s in samples])
             xy = sampled[:, :2]
-            truths = [s[3] for s in self._samples]
-            self._samples = []
+            truths = [s[3] for s in samples]
             rows = np.arange(len(uavs))
-            virtual = self.formation.positions(self.profile.distance(times))[rows, uavs]
-            reference = smoothed_reference(self.formation, self.profile, times, self.window_s)
-            smooth = reference.positions[rows, uavs]
+            virtual = evaluation.virtual[1:][rows, uavs]
+            smooth = evaluation.reference.positions[1:][rows, uavs]
             errors = np.hypot(*(xy - virtual).T)
             control = np.hypot(*(xy - smooth).T)
             self.tracking_now[uavs] = errors
-            events += self.safety.tracking(t, uavs, errors, control)
+            if not self.aborting:  # landing where they are: V_n no longer applies
+                events += self.safety.tracking(t, uavs, errors, control)
             for k, index in enumerate(uavs.tolist()):
                 driver = self.drivers[index]
                 tel = driver.telemetry
@@ -921,8 +915,7 @@ class MissionRun:
             fleet[index, 2] = track.last_position[2]
         positions = fleet[:, :2]
         events += self.safety.positions(t, positions)
-        targets = self.formation.positions(self.profile.distance(t))
-        self.recorder.fleet(t, fleet, targets, now)
+        self.recorder.fleet(t, fleet, evaluation.virtual[0], now)
         silent = np.array([d.link.silent_for(now) for d in self.drivers])
         timeout = max(
             self.options.link_timeout_s / self.options.speedup, self.options.link_wall_floor_s
@@ -953,25 +946,68 @@ class MissionRun:
                 now,
             )
 
+    def _unavailable(self) -> dict[int, str]:
+        """The UAVs the formation cannot fly on without, index -> why: a lost link, or a
+        vehicle that left guided flight by itself (its own failsafe: holding or landing)."""
+        out = {}
+        for index, driver in enumerate(self.drivers):
+            if self.links.lost[index]:
+                out[index] = "link lost"
+            elif (
+                driver.phase in (Phase.HOLDING, Phase.LANDING) and not self.tracks[index].land_sent
+            ):
+                out[index] = f"left the formation by itself ({driver.phase.value})"
+        return out
+
     def _link_policy(self, t: float, now: float) -> None:
-        lost = self.links.lost
-        if lost.any() and not self.aborting:
-            if self.frozen_by != "link":
-                if self.frozen_by is None:
-                    self._freeze("link", now)
-                self.frozen_by = "link"
-                if self.options.interactive:
-                    self.view.message(
-                        "error", "link lost: formation frozen. Type a speed to resume, or 'land'."
-                    )
-                else:
-                    self._link_deadline = t + self.options.link_wait_s
-            elif self._link_deadline is not None and t >= self._link_deadline:
-                gone = ", ".join(str(i + 1) for i in np.flatnonzero(lost))
-                self.land_everyone(f"link of UAV {gone} lost for {self.options.link_wait_s:g} s")
-        elif self.frozen_by == "link" and not self.aborting and not self.options.interactive:
+        """A UAV lost (link, or its own failsafe) freezes the formation. When its link is back,
+        a UAV that holds is taken back to guided flight, and the formation stays frozen until
+        every such UAV has rejoined its target (within `vehicle.tracking_allowance`), so that
+        no UAV is asked to catch up a formation that ran on. Without an operator, a UAV still
+        lost or not rejoined after `link_wait_s`, or one that lands by itself, lands everyone."""
+        if self.aborting:
+            return
+        unavailable = self._unavailable()
+        for index in unavailable:
+            driver = self.drivers[index]
+            if driver.phase == Phase.HOLDING and not self.links.lost[index]:
+                driver.resume(now)  # its link is back: guided flight again
+                self._event(
+                    MonitorEvent(
+                        t, "warning", "rejoin", f"UAV {index + 1}: back to guided flight, rejoining",
+                        index + 1,
+                    ),
+                    now,
+                )  # fmt: skip
+            self._rejoining.add(index)
+        if unavailable and self.frozen_by != "link":
+            if self.frozen_by is None:
+                self._freeze("link", now)
+            self.frozen_by = "link"
+            if self.options.interactive:
+                self.view.message(
+                    "error", "link lost: formation frozen. Type a speed to resume, or 'land'."
+                )
+            else:
+                self._link_deadline = t + self.options.link_wait_s
+        if self.frozen_by != "link" or self.options.interactive:
+            self._rejoining.clear()  # the operator decided
+            return
+        landing = [i for i in unavailable if self.drivers[i].phase == Phase.LANDING]
+        if landing:
+            self.land_everyone(f"UAV {landing[0] + 1} {unavailable[landing[0]]}", now)
+            return
+        tolerance = self.mission.vehicle.tracking_allowance
+        away = [i for i in self._rejoining if not self.tracking_now[i] <= tolerance]
+        if not unavailable and not away:
+            self._rejoining.clear()
             self._link_deadline = None
             self._resume(now)
+        elif self._link_deadline is not None and t >= self._link_deadline:
+            gone = sorted(set(unavailable) | set(away))
+            names = ", ".join(str(i + 1) for i in gone)
+            why = unavailable.get(gone[0], "not back within its margin")
+            self.land_everyone(f"UAV {names}: {why} for {self.options.link_wait_s:g} s", now)
 
     def _collect_acks(self, now: float) -> None:
         speedup = self.options.speedup
@@ -1023,26 +1059,7 @@ class MissionRun:
             self.view.message(level, f"UAV {driver.uav_id}: {event.text}")
         if driver.phase == Phase.FAILED and self.clock.anchored and not self.aborting:
             self.fatal = True
-            self.land_everyone(f"UAV {driver.uav_id} failed: {driver.failure_reason}")
-
-    def _poll_fleet(self, now: float) -> None:
-        if self.fleet is None:
-            return
-        for report in getattr(self.fleet, "radio_reports", list)():  # the radio medium's
-            self.radio_report = report
-            if self.clock.anchored:
-                self.recorder.radio({**report, "t": self.clock.mission_time(now)}, now)
-        for problem in self.fleet.poll():
-            t = self.clock.mission_time(now) if self.clock.anchored else 0.0
-            if not self.clock.anchored or not problem.uavs:
-                self._event(MonitorEvent(t, "error", "vehicle_exit", problem.text, fatal=True), now)
-                if not self.clock.anchored:
-                    self.aborting = True
-                continue
-            for uav in problem.uavs:
-                silent = self.drivers[uav - 1].link.silent_for(now)
-                for event in self.links.mark_lost(t, uav - 1, problem.text, silent):
-                    self._event(event, now)
+            self.land_everyone(f"UAV {driver.uav_id} failed: {driver.failure_reason}", now)
 
     def _event(self, event: MonitorEvent, now: float) -> None:
         self.events.append(event)

@@ -23,11 +23,11 @@ from rich.console import Console
 from rich.table import Table
 
 from gcs.errors import InputError
+from gcs.flight.clock import MissionClock
 from gcs.link import mavutil
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
 from gcs.recording import FlightRecorder
-from gcs.flight.clock import MissionClock
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "table-ii.yaml"
 RATE_HZ = 10.0

@@ -48,12 +48,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
+import foxglove
 import numpy as np
 import yaml
 from foxglove.channels import FrameTransformsChannel, GeoJsonChannel, LocationFixChannel, LogChannel
 from foxglove.messages import GeoJson, LocationFix, Log, LogLevel, SceneUpdate, Timestamp
 
-import foxglove
 from gcs import scene
 
 #: Recording profile written in the MCAP header.

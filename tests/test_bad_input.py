@@ -24,10 +24,10 @@ from hypothesis import strategies as st
 
 import gcs.cli
 import vehicles.cli
+from gcs.flight.clock import MissionClock
 from gcs.link import Link
 from gcs.logreader import read_recording
 from gcs.recording import FlightRecorder
-from gcs.flight.clock import MissionClock
 from gcs.signing import FleetSigning
 from tests.attacker import codec, mutate, timestamp_now
 from tests.flying import MISSION, Flight, mission_file

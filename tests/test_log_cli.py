@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from gcs.flight.clock import MissionClock
 from gcs.link import mavutil
 from gcs.recording import FlightRecorder
-from gcs.flight.clock import MissionClock
 
 
 @pytest.fixture

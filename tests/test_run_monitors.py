@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs.monitors import NEAR_HYSTERESIS_M, LinkMonitor, SafetyMonitor
 from gcs.flight.clock import MissionClock, VehicleClock
+from gcs.monitors import NEAR_HYSTERESIS_M, LinkMonitor, SafetyMonitor
 from planner.obstacles import Obstacles
 
 BOX = np.array([[10.0, -5.0], [20.0, -5.0], [20.0, 5.0], [10.0, 5.0]])

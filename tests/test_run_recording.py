@@ -19,9 +19,9 @@ from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
+from gcs.flight.clock import MissionClock
 from gcs.link import mavutil
 from gcs.recording import FlightRecorder
-from gcs.flight.clock import MissionClock
 
 mavlink = mavutil.mavlink
 

@@ -196,6 +196,7 @@ def test_a_bad_key_file_is_refused_before_anything_flies(tmp_path, monkeypatch, 
     assert not (tmp_path / "run.mcap").exists()  # nothing started, nothing recorded
 
 
+@pytest.mark.slow
 def test_insecure_says_so_loudly_and_in_the_log(tmp_path):
     """`--insecure` on a fleet that never answers (then Ctrl-C): a warning line at once and a
     warning event in the recording."""

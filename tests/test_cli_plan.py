@@ -85,6 +85,7 @@ def test_corpus_is_refused_by_check_and_plan(gcs_main, command, path):
     assert_refused(gcs_main("mission", command, path), path)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "name", ["boolean-number", "row-near-obstacle", "leader-beyond-auto-fleet", "not-yaml"]
 )
@@ -97,6 +98,7 @@ def test_corpus_sample_as_real_processes(gcs_process, name):
 # --- plan ---------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_plan_json_of_the_paper_scenario(gcs_process, tmp_path):
     result = gcs_process("mission", "plan", EXAMPLES / "table-ii.yaml", "--json", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
@@ -219,6 +221,7 @@ def test_usage_errors_are_one_line_exit_2(gcs_main, monkeypatch, args, start):
     assert len(result.stderr.splitlines()) == 1 and result.stderr.startswith(start)
 
 
+@pytest.mark.slow
 def test_usage_error_as_a_real_process(gcs_process):
     result = gcs_process("mission", "plan", "--json")
     assert result.returncode == 2 and result.stdout == ""
@@ -232,6 +235,7 @@ def test_city_blocks_plan(gcs_main):
     assert plan["valid"] and plan["fleet_size"] == plan["min_fleet_size"]
 
 
+@pytest.mark.slow
 def test_demo_plans_plots_and_flies_the_paper_scenario(tmp_path, monkeypatch, capsys):
     """`make demo`: exit 0 means the nine simulated UAVs flew Table II within every bound."""
     from gcs import demo

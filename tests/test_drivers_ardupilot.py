@@ -17,6 +17,9 @@ from tests.fakes.ardupilot import GUIDED, LAND, ArduCopterModel
 from tests.fakes.flight import Flight, SinkDriver, home_of, hover, leg
 from tests.fakes.replay import drive, load
 
+# Every test here starts a process or flies over UDP.
+pytestmark = pytest.mark.slow
+
 SPEEDUP = 40.0  # the boot's ~42 s take ~1 s
 ORIGIN = Origin(-35.3632, 149.1652, 584.0)
 SLOT = (25.0, -40.0)

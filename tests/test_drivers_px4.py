@@ -26,6 +26,9 @@ from tests.fakes.px4 import (
 )
 from tests.fakes.replay import drive, load
 
+# Every test here starts a process or flies over UDP.
+pytestmark = pytest.mark.slow
+
 SPEEDUP = 20.0
 ORIGIN = Origin(47.3975, 8.5450, 488.0)
 SLOT = (-30.0, 45.0)

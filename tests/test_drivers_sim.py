@@ -74,6 +74,7 @@ def test_registry_picks_the_family_from_the_backend():
         driver_class("betaflight")
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_connect_takeoff_speed_change_leader_and_land():
     fleet, drivers = start([[0.0, 0.0], [-14.0, 0.0]], leaders={2: [(1.0, 3.0)]})
@@ -132,6 +133,7 @@ def test_connect_takeoff_speed_change_leader_and_land():
         close(fleet, drivers)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_wrong_system_id_and_misplaced_home_are_refused():
     # UAV 1 answers as system 1 but the driver expects 3; UAV 2 starts 10 m off its slot
@@ -148,6 +150,7 @@ def test_wrong_system_id_and_misplaced_home_are_refused():
         close(fleet, drivers)
 
 
+@pytest.mark.slow
 def test_land_before_takeoff_needs_no_flight(tmp_path):
     link = Link("udpout:127.0.0.1:9", 1)
     try:

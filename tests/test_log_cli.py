@@ -103,6 +103,7 @@ def test_replay_refusals(gcs_log, events_only, tiny_flight):
     one_line_exit_2(gcs_log("log", "replay", tiny_flight), "--to")  # required
 
 
+@pytest.mark.slow
 def test_replay_keeps_the_recorded_spacing_divided_by_the_rate(gcs_log, tiny_flight):
     from gcs.logreader import read_recording
     from gcs.replay import open_output, recorded_frames, replay

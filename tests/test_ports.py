@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import socket
 
+import pytest
+
 from vehicles.ports import LOWEST_PORT, ephemeral_floor, free_udp_ports
+
+# Every test here starts a process or flies over UDP.
+pytestmark = pytest.mark.slow
 
 
 def test_a_picked_block_is_free_and_below_the_ephemeral_range():

@@ -61,6 +61,7 @@ def read_trace(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
+@pytest.mark.slow
 def test_a_uav_out_of_range_loses_its_setpoints_holds_and_comes_back_through_a_relay(tmp_path):
     speedup = 4.0
     radio_range = 60.0
@@ -193,6 +194,7 @@ def test_a_uav_out_of_range_loses_its_setpoints_holds_and_comes_back_through_a_r
     assert one_hop and all(d == pytest.approx(2.0) for d in one_hop)
 
 
+@pytest.mark.slow
 def test_latency_through_the_process_grows_with_the_hop_count():
     """Three UAVs in a chain (1, 2 and 3 hops from the station): a datagram to each, then its
     reply, is delayed hops x the hop latency, on the wall clock."""
@@ -264,6 +266,7 @@ def test_bad_flags_are_one_line_naming_the_flag_and_exit_2(argv, flag, capsys):
     assert captured.out == "" and len(lines) == 1 and flag in lines[0]
 
 
+@pytest.mark.slow
 def test_a_port_in_use_is_exit_2(capsys):
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
         taken.bind(("127.0.0.1", 0))

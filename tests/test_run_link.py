@@ -7,7 +7,12 @@ import selectors
 import socket
 import time
 
+import pytest
+
 from gcs.link import Link, mavutil
+
+# Every test here starts a process or flies over UDP.
+pytestmark = pytest.mark.slow
 
 mavlink = mavutil.mavlink
 

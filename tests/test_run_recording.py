@@ -304,6 +304,7 @@ def test_the_fleet_moves_frames_and_links_at_every_tick(tmp_path: Path, planned)
     assert sorted(map(tuple, fleet["station_links"])) == [(1, 0), (2, 0), (3, 1)]
 
 
+@pytest.mark.slow
 def test_a_killed_writer_leaves_a_file_readable_up_to_the_last_second(tmp_path: Path):
     from gcs.logreader import read_recording
 
@@ -413,6 +414,7 @@ def foxglove_channels(sock: socket.socket, wanted: set[str], deadline: float) ->
     return channels
 
 
+@pytest.mark.slow
 def test_the_recording_is_served_live_over_foxglove_websocket(tmp_path: Path):
     clock, wall = _anchored_clock()
     recorder = FlightRecorder(tmp_path / "live.mcap", clock, serve_port=0)
@@ -452,6 +454,7 @@ def test_the_recording_is_served_live_over_foxglove_websocket(tmp_path: Path):
         recorder.close()
 
 
+@pytest.mark.slow
 def test_a_taken_port_is_refused_before_the_file_is_created(tmp_path: Path):
     from gcs.recording import LiveServerError
 
@@ -466,6 +469,7 @@ def test_a_taken_port_is_refused_before_the_file_is_created(tmp_path: Path):
     assert not (tmp_path / "run.mcap").exists()
 
 
+@pytest.mark.slow
 def test_mission_run_refuses_a_taken_foxglove_port_with_one_line(tmp_path, monkeypatch, capsys):
     import gcs.cli
 

@@ -102,6 +102,7 @@ def signed_link(key: bytes, events: list) -> tuple[Link, socket.socket, FleetSig
     return link, vehicle, signing
 
 
+@pytest.mark.slow
 def test_the_ground_station_signs_and_refuses_unsigned_forged_and_replayed_telemetry():
     key = RNG.randbytes(32)
     events: list = []
@@ -176,6 +177,7 @@ def ground_station(port: int, key: bytes | None, sysid: int = 255) -> GroundStat
     return station
 
 
+@pytest.mark.slow
 def test_a_vehicle_with_a_key_obeys_signed_commands_only(tmp_path: Path):
     path = key_file(tmp_path)
     key = read_key_file(path)
@@ -220,6 +222,7 @@ def test_a_vehicle_with_a_key_obeys_signed_commands_only(tmp_path: Path):
             station.close()
 
 
+@pytest.mark.slow
 def test_setup_signing_is_taken_only_while_keyless_and_disarmed(tmp_path: Path):
     key = RNG.randbytes(32)
     with VehicleProcess(count=2, speedup=SPEEDUP, args=["--gcs-timeout", "1000"]) as process:
@@ -260,6 +263,7 @@ def test_setup_signing_is_taken_only_while_keyless_and_disarmed(tmp_path: Path):
             second.close()
 
 
+@pytest.mark.slow
 def test_an_orphaned_vehicle_process_exits_once_every_vehicle_is_disarmed(tmp_path: Path):
     """A parent that starts `vehicles sim --exit-when-orphaned` and dies at once: the vehicles
     (disarmed on the ground) leave too; without the flag they would run forever."""

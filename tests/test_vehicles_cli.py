@@ -63,6 +63,7 @@ def test_a_bad_positions_file_names_the_file(tmp_path, capsys):
     assert str(path) in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_port_in_use_is_exit_2_with_one_line():
     base = free_udp_ports(3)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
@@ -76,6 +77,7 @@ def test_a_port_in_use_is_exit_2_with_one_line():
     assert "--base-port" in lines[0] and "Traceback" not in stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signals_stop_the_simulation_cleanly(sig):
     process = VehicleProcess(count=2, speedup=1.0)
@@ -87,6 +89,7 @@ def test_signals_stop_the_simulation_cleanly(sig):
     assert "Traceback" not in stderr and "stopped after" in stderr
 
 
+@pytest.mark.slow
 def test_count_hosts_vehicles_on_their_own_ports_ids_and_slots_and_pushes_to_out():
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
         out.bind(("127.0.0.1", 0))

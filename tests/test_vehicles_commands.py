@@ -260,6 +260,7 @@ def test_telemetry_reports_a_parked_vehicle(gcs: GroundStation):
     )
 
 
+@pytest.mark.slow
 def test_a_leader_sends_its_speed_requests_to_the_gcs_at_mission_time():
     with VehicleProcess(count=1, speedup=SPEEDUP, args=["--leader-requests", "3:4.5"]) as process:
         gcs = GroundStation(process.port(), speedup=SPEEDUP)

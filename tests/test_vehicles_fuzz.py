@@ -9,9 +9,13 @@ import struct
 import time
 
 import numpy as np
+import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from vehicles.testing import GroundStation, VehicleProcess, local_of
+
+# Every test here starts a process or flies over UDP.
+pytestmark = pytest.mark.slow
 
 SPEEDUP = 4.0
 DATAGRAMS = 100_000

@@ -103,9 +103,10 @@ def register(mission_commands: argparse._SubParsersAction) -> None:
     run.add_argument(
         "--vehicles-per-process",
         type=int,
-        default=1,
+        default=None,
         metavar="N",
-        help="sim backend: UAVs hosted by each `vehicles sim` process (default 1)",
+        help="sim backend: UAVs hosted by each `vehicles sim` process (default: all of them in "
+        "one, a leader in its own: fewer processes leave more CPU to the ground station)",
     )
     run.add_argument("--no-live", action="store_true", help="no live view, even in a terminal")
     run.set_defaults(handler=run_command)
@@ -150,7 +151,7 @@ def check_arguments(args: argparse.Namespace) -> None:
         raise InputError(
             None, "--takeoff-lead", f"a number of seconds > 0, got {args.takeoff_lead:g}"
         )
-    if args.vehicles_per_process < 1:
+    if args.vehicles_per_process is not None and args.vehicles_per_process < 1:
         raise InputError(None, "--vehicles-per-process", "an integer >= 1")
     if args.foxglove is not None and not 0 <= args.foxglove < 65536:
         raise InputError(
@@ -300,7 +301,7 @@ def sim_setup(mission, formation, args, leaders, log_path: Path) -> SimVehicleSe
         origin=mission.origin,
         speedup=args.speedup,
         seed=mission.sim.seed,
-        per_process=args.vehicles_per_process,
+        per_process=args.vehicles_per_process or len(formation.start_slots),
         max_speed=mission.vehicle.max_speed,
         max_acceleration=mission.vehicle.max_acceleration,
         wind_mps=(

@@ -22,6 +22,8 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink import mavutil  # noqa: E402
 
+from fleetwire.frames import newest_telemetry  # noqa: E402
+
 # The ground station's MAVLink identity (CONTRACTS.md: the GCS is system 255): the fleet's.
 from fleetwire.messages import GCS_COMPONENT_ID, GCS_SYSTEM_ID  # noqa: E402
 
@@ -29,6 +31,11 @@ log = logging.getLogger(__name__)
 
 #: Bound on the messages one `receive` call drains (the scheduler must get back to its tick).
 MAX_MESSAGES_PER_RECEIVE = 10_000
+#: More datagrams than this waiting on one link is a backlog: only its newest telemetry is
+#: decoded (at 10-20 telemetry messages per vehicle second, a few ticks' worth).
+BACKLOG_DATAGRAMS = 64
+#: ... the newest this many of each streamed message.
+STALE_KEEP = 2
 
 #: Called for every message in or out: (direction "rx" | "tx", raw bytes, message, wall time).
 Capture = Callable[[str, bytes, object, float], None]
@@ -48,6 +55,7 @@ class LinkCounters:
     received: int = 0  # valid messages from the expected system
     foreign: int = 0  # valid messages from another system id (ignored)
     bad: int = 0  # bytes that were not MAVLink
+    stale: int = 0  # telemetry datagrams of a backlog, superseded and not decoded
     sent: int = 0
 
 
@@ -133,9 +141,15 @@ class Link:
     def _receive_datagrams(self) -> list:
         """UDP: each datagram parsed on its own. A MAVLink frame never spans datagrams, so an
         incomplete frame left at a datagram's end (garbage, truncation) is dropped instead of
-        swallowing the valid datagrams that follow."""
+        swallowing the valid datagrams that follow.
+
+        Every waiting datagram is read (cheap), but of a backlog (a ground station that fell
+        behind: a busy machine, a stall) only the newest telemetry is decoded: what the vehicle
+        streams is superseded by its next sample, and decoding seconds of stale samples is
+        what would keep the loop behind. Acknowledgements, texts and commands are all kept.
+        Shed datagrams are counted in `counters.stale`."""
         conn = self._conn
-        out = []
+        datagrams = []
         for _ in range(MAX_MESSAGES_PER_RECEIVE):
             try:
                 data = conn.recv()
@@ -144,7 +158,14 @@ class Link:
                 break
             if not data:
                 break
-            mav = conn.mav
+            datagrams.append(data)
+        if len(datagrams) > BACKLOG_DATAGRAMS:
+            kept = newest_telemetry(datagrams, STALE_KEEP)
+            self.counters.stale += len(datagrams) - len(kept)
+            datagrams = kept
+        out = []
+        mav = conn.mav
+        for data in datagrams:
             try:
                 parsed = mav.parse_buffer(data) or []
             except Exception as error:  # noqa: BLE001 - pymavlink raises bare errors on garbage

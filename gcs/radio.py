@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import signal
 import socket
 import subprocess
@@ -20,6 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from gcs.children import start_child
 
 log = logging.getLogger(__name__)
 
@@ -116,18 +117,9 @@ class MediumProcess:
         ]  # fmt: skip
         self.command = cmd
         log.info("starting %s", " ".join(cmd))
-        root = str(Path(__file__).resolve().parents[1])  # the tree holding `vehicles`
-        path = os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))
         stderr = open(stderr_path, "wb") if stderr_path else subprocess.DEVNULL  # noqa: SIM115
         try:
-            self.process = subprocess.Popen(
-                cmd,
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                stderr=stderr,
-                env={**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": path},
-                start_new_session=True,  # Ctrl-C in the terminal reaches the GCS only
-            )
+            self.process = start_child(cmd, root=Path(__file__).resolve().parents[1], stderr=stderr)
         except OSError:
             self._reports.close()
             raise

@@ -73,6 +73,11 @@ def run_json(result: RunResult, log_path: str, safety_margin: float) -> dict[str
             "jitter_p99_ms": _num(result.setpoint_jitter_p99_ms),
             "max_gap_ms": _num(result.setpoint_max_gap_ms),
         },
+        "stalls": [
+            {"t": _num(s.stood_at), "resumed_s": _num(s.resumed_at), "held_back_s": s.held_back_s}
+            for s in result.stalls
+        ],
+        "telemetry_shed": result.telemetry_shed,
         "events": [
             {"t": _num(e.t), "level": e.level, "kind": e.kind, "text": e.text, "uav": e.uav}
             for e in result.events

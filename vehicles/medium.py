@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.frames import frames
 from vehicles.frames import GeodeticOrigin
 from vehicles.ground_users import (
     DEFAULT_PACKET_BYTES,
@@ -84,31 +85,6 @@ class MediumConfig:
     sample_period_s: float = 0.1  # connectivity samples and ground-user sends (simulated s)
     report_period_s: float = 1.0  # simulated s
     position_horizon_s: float = 1.0
-
-
-def frames(datagram: bytes) -> list[tuple[int, int, bytes]]:
-    """(message id, system id, payload) of each MAVLink frame of a datagram (several frames
-    may share one), read from the headers only (no CRC check: the frames come from our own
-    vehicles; signed frames are read the same way). Stops at anything that is not a frame."""
-    out = []
-    index, size = 0, len(datagram)
-    while index + 8 <= size:
-        magic, length = datagram[index], datagram[index + 1]
-        if magic == 0xFD:
-            if index + 10 > size:
-                break
-            signed = datagram[index + 2] & 0x01
-            msgid = datagram[index + 7] | datagram[index + 8] << 8 | datagram[index + 9] << 16
-            sysid, start = datagram[index + 5], index + 10
-            end = start + length + 2 + (13 if signed else 0)
-        elif magic == 0xFE:
-            msgid, sysid, start = datagram[index + 5], datagram[index + 3], index + 6
-            end = start + length + 2
-        else:
-            break
-        out.append((msgid, sysid, bytes(datagram[start : start + length])))
-        index = end
-    return out
 
 
 def sim_state_position(

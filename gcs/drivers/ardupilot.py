@@ -25,8 +25,7 @@ from __future__ import annotations
 from typing import ClassVar
 
 from fleetwire.modes import COPTER_MODE, COPTER_MODE_NAME
-from gcs.drivers.autopilot import AutopilotDriver
-from gcs.drivers.base import CommandSpec, FlightMode, Phase, RetryPolicy, mavlink
+from gcs.drivers.base import CommandSpec, Driver, FlightMode, Phase, RetryPolicy, mavlink
 
 #: Copter mode numbers (HEARTBEAT custom_mode) the driver uses (pymavlink's).
 GUIDED, RTL, LAND, BRAKE, SMART_RTL = (
@@ -44,7 +43,7 @@ EKF_CONST_POS_MODE = mavlink.EKF_CONST_POS_MODE
 GPS_FIX_3D = mavlink.GPS_FIX_TYPE_3D_FIX
 
 
-class ArduPilotDriver(AutopilotDriver):
+class ArduPilotDriver(Driver):
     """Driver of one ArduCopter (SITL or real) over MAVLink."""
 
     family = "ardupilot"

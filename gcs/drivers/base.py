@@ -48,7 +48,8 @@ What it MAY override (defaults: a plain, well-behaved autopilot)
 * Capability properties: `accepts_acceleration_feedforward`,
   `needs_setpoint_stream_before_offboard`, `acks_set_mode`, `setpoints_time_out_on_vehicle`,
   `honours_speed_change_time`, `home_tolerance_m`.
-* `on_connected(now)`: once, after the first heartbeat (e.g. `MAV_CMD_SET_MESSAGE_INTERVAL`).
+* `stream_rates_hz` (class attribute): the telemetry streams asked for (or turned off, rate 0)
+  by `on_connected(now)`, which runs once, after the first heartbeat.
 * `position_ready()`: the position estimate allows arming (ArduPilot adds EKF, pre-arm bit).
 * `arm_allowed(now)`: an ARM may be sent now, the guided mode being shown (PX4: pre-arm bit).
 * `mode_request(mode)`: the command of a mode request (default `mode_command`; LAND:
@@ -273,6 +274,8 @@ class Driver(ABC):
     takeoff_altitude_tolerance_m: ClassVar[float] = 1.0
     #: Period (vehicle time) of the GCS heartbeat sent to the UAV.
     heartbeat_period_s: ClassVar[float] = 1.0
+    #: Message id -> rate (Hz, vehicle time) asked for once connected (0: turned off).
+    stream_rates_hz: ClassVar[dict[int, float]] = {}
     #: Pacing of commands, refusals, confirmations (see `RetryPolicy`).
     retry_policy: ClassVar[RetryPolicy] = RetryPolicy()
     #: Setpoints flowing without a gap for this long (vehicle time) make a stream...
@@ -349,8 +352,26 @@ class Driver(ABC):
         return True
 
     def on_connected(self, now: float) -> None:
-        """Called once, after the first heartbeat (request streams, versions...)."""
-        return None
+        """Called once, after the first heartbeat: asks for the family's `stream_rates_hz`
+        (MAV_CMD_SET_MESSAGE_INTERVAL; rate 0 turns a stream off)."""
+        for message_id, rate in self.stream_rates_hz.items():
+            entry = mavlink.mavlink_map.get(message_id)
+            name = entry.msgname if entry is not None else str(message_id)
+            self.send_command(
+                CommandSpec(
+                    mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                    (message_id, 1e6 / rate if rate > 0 else -1, 0, 0, 0, 0, 0),
+                    label=f"{name} at {rate:g} Hz" if rate > 0 else f"{name} off",
+                    key=("interval", message_id),
+                ),
+                now,
+                lambda outcome, when, what=name: self._on_interval_result(what, outcome, when),
+            )
+
+    def _on_interval_result(self, what: str, outcome: Outcome, now: float) -> None:
+        if outcome.refused:
+            text = f"stream {what}: {outcome.describe()}"
+            self.emit("command", text, now, mavlink.MAV_SEVERITY_WARNING)
 
     def position_ready(self) -> bool:
         """True when the autopilot's position estimate allows arming."""

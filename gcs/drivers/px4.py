@@ -33,8 +33,7 @@ import math
 from typing import ClassVar
 
 from fleetwire.modes import PX4_MODE, PX4_MODE_PARTS, px4_custom_mode
-from gcs.drivers.autopilot import AutopilotDriver
-from gcs.drivers.base import CommandSpec, FlightMode, Phase, RetryPolicy, mavlink
+from gcs.drivers.base import CommandSpec, Driver, FlightMode, Phase, RetryPolicy, mavlink
 
 #: HEARTBEAT custom_mode of the PX4 modes the driver meets (pymavlink's `px4_map`).
 OFFBOARD, AUTO_LOITER, AUTO_LAND, AUTO_RTL, AUTO_TAKEOFF, POSCTL = (
@@ -51,7 +50,7 @@ _MODE_NAMES = {OFFBOARD: "OFFBOARD", AUTO_LOITER: "AUTO.LOITER", AUTO_LAND: "AUT
                AUTO_RTL: "AUTO.RTL", POSCTL: "POSCTL", AUTO_TAKEOFF: "AUTO.TAKEOFF"}  # fmt: skip
 
 
-class PX4Driver(AutopilotDriver):
+class PX4Driver(Driver):
     """Driver of one PX4 multicopter (SITL or real) over its offboard MAVLink link."""
 
     family = "px4"

@@ -12,7 +12,6 @@ vehicle honours.
 from __future__ import annotations
 
 import logging
-import os
 import signal
 import subprocess
 import sys
@@ -22,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from fleetwire.messages import MISSION_TIME_NAME, encode_mission_time
-from fleetwire.modes import COPTER_MODE
+from fleetwire.modes import COPTER_MODE, COPTER_MODE_NAME
+from gcs.children import start_child
 from gcs.drivers.base import CommandSpec, Driver, Fleet, FleetProblem, FlightMode
 from gcs.geodesy import Origin
 from gcs.link import mavutil
@@ -48,6 +48,12 @@ class SimDriver(Driver):
     connect_timeout_s = 30.0
     connect_wall_floor_s = 20.0  # a Python process starting on a busy 2-core machine
     initialise_timeout_s = 30.0
+    #: Streams the ground station never reads are turned off: decoding them is CPU that a
+    #: busy machine does not have (they are a third of what the vehicles send).
+    stream_rates_hz = {
+        mavlink.MAVLINK_MSG_ID_ATTITUDE: 0.0,
+        mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.0,
+    }
 
     def mode_command(self, mode: FlightMode) -> CommandSpec:
         return CommandSpec(
@@ -58,6 +64,10 @@ class SimDriver(Driver):
 
     def current_mode(self) -> FlightMode | None:
         return _MODE_OF_NUMBER.get(self.telemetry.custom_mode)
+
+    def describe_mode(self) -> str:
+        number = self.telemetry.custom_mode
+        return COPTER_MODE_NAME.get(number, str(number))
 
     def takeoff_command(self, relative_altitude: float) -> CommandSpec | None:
         return CommandSpec(
@@ -253,17 +263,8 @@ class SimFleet(Fleet):
         if self.setup.log_dir is not None:
             self.setup.log_dir.mkdir(parents=True, exist_ok=True)
             stderr = open(self.setup.log_dir / f"vehicles-{group[0] + 1}.log", "wb")  # noqa: SIM115
-        root = str(Path(__file__).resolve().parents[2])  # the tree holding `vehicles`
-        path = os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))
         try:
-            return subprocess.Popen(
-                cmd,
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                stderr=stderr,
-                env={**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": path},
-                start_new_session=True,  # Ctrl-C in the terminal reaches the GCS only
-            )
+            return start_child(cmd, root=Path(__file__).resolve().parents[2], stderr=stderr)
         finally:
             if stderr is not subprocess.DEVNULL:
                 stderr.close()

@@ -42,7 +42,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -173,6 +173,8 @@ class RunResult:
     interrupted: int
     fatal: bool
     radio: dict | None = None  # the radio medium's run JSON `radio` object, if one ran
+    stalls: list[Stall] = field(default_factory=list)  # stalls of the loop, held back or not
+    telemetry_shed: int = 0  # stale telemetry datagrams of backlogs, not decoded
 
 
 class View(Protocol):
@@ -324,7 +326,7 @@ class GroundStation:
         self._settle_deadline: float | None = None
         self.ticks = 0
         self.radio_report: dict | None = None  # the radio medium's last report
-        self._last_awake: float | None = None  # the loop last woke (a tick or a receive)
+        self._last_awake: float | None = None  # the last tick (or the end of a stall)
         self.stalls: list[Stall] = []
         self.current_speed = plan.speeds.initial
         self.tracking_now = np.full(size, np.nan)
@@ -402,6 +404,7 @@ class GroundStation:
                 return False
             return None
         self.clock.anchor(now, -self.takeoff_lead_s())
+        self._last_awake = now
         bound, budget = self.smoothing_bound(), self.mission.error_budget
         if bound > budget:
             self._event(
@@ -492,6 +495,7 @@ class GroundStation:
         """One tick of the flight (the mission's setpoint rate): requests, take-offs and
         landings, setpoints, drivers, acks, monitors, the link policy."""
         self.ticks += 1
+        self._last_awake = now
         t = self.clock.mission_time(now)
         self.mission_time = t
         self._handle_interrupts(now)
@@ -515,9 +519,10 @@ class GroundStation:
 
     # ------------------------------------------------------------------ stalls
     def _stalled_since(self, now: float) -> float | None:
-        """The time the loop last woke, if it stalled since (the process was stopped or
-        starved of CPU for a setpoint timeout of mission time); else None."""
-        last, self._last_awake = self._last_awake, now
+        """The time of the last tick (the last setpoints sent), if the loop stalled since (the
+        process was stopped or starved of CPU for a setpoint timeout of mission time); else
+        None."""
+        last = self._last_awake
         if last is None or not self.clock.anchored:
             return None
         gap = now - last
@@ -539,6 +544,7 @@ class GroundStation:
         paused_at = self._where_the_formation_stands(t_last, t_now)
         held_back = t_now - paused_at
         self.clock.resume(now, paused_at)
+        self._last_awake = now
         text = (
             f"GCS scheduler stalled {now - last:.2f} s ({t_now - t_last:.1f} s of mission "
             "time): no setpoints meanwhile, the vehicles flew on their own failsafe; "
@@ -1166,6 +1172,8 @@ class GroundStation:
             interrupted=self.interrupts,
             fatal=self.fatal,
             radio=run_json_radio(self.radio_report),
+            stalls=list(self.stalls),
+            telemetry_shed=sum(getattr(d.link.counters, "stale", 0) for d in self.drivers),
         )
 
 

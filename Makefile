@@ -14,7 +14,7 @@ $(STAMP): requirements.lock pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/python -m gcs.demo
+	$(BIN)/python -m gcs.cli.demo
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
@@ -27,8 +27,8 @@ bench: $(STAMP)
 	$(BIN)/python -m bench
 
 lint: $(STAMP)
-	$(BIN)/ruff check fleetwire gcs planner vehicles tests bench
-	$(BIN)/ruff format --check fleetwire gcs planner vehicles tests bench
+	$(BIN)/ruff check fleetwire gcs medium planner vehicles tests bench
+	$(BIN)/ruff format --check fleetwire gcs medium planner vehicles tests bench
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

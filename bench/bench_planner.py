@@ -32,7 +32,8 @@ from planner.scenarios import (
     random_buildings,
     scenario_problem,
 )
-from planner.search import PathPlan, plan_path
+from planner.search import plan_path
+from planner.types import PathPlan
 
 #: Reference visibility graphs above this many vertices are skipped (all pairs is O(n^2)).
 REFERENCE_MAX_VERTICES = 2500

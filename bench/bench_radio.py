@@ -1,11 +1,11 @@
 """Radio medium: latency it adds per packet at infinite range, packets per second it forwards,
 and how fast the fast in-process mode flies.
 
-Latency: a real `python -m vehicles.medium_cli` process with an infinite range, 0 ms per hop
+Latency: a real `python -m medium.cli` process with an infinite range, 0 ms per hop
 and no jitter (so only the process itself delays), between a "GCS" socket and "vehicle"
 sockets of this process on loopback; one datagram at a time, each way, against the same
 exchange without the medium. Throughput: bursts of 200 datagrams to every UAV's port, counted
-at the vehicle sockets. Fast mode: `gcs.fastsim.fly_fast` on the example missions.
+at the vehicle sockets. Fast mode: `gcs.sim.fastsim.fly_fast` on the example missions.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ def _medium(count: int, listen: int, vehicle_ports: list[int]) -> subprocess.Pop
         [
             sys.executable,
             "-m",
-            "vehicles.medium_cli",
+            "medium.cli",
             "--count",
             str(count),
             "--base-port",
@@ -155,9 +155,9 @@ def measure(count: int) -> dict:
 
 
 def fast_mode() -> list[tuple[str, float, float]]:
-    from gcs.fastsim import fly_fast
     from gcs.mission import load_mission
     from gcs.planning import plan_mission
+    from gcs.sim.fastsim import fly_fast
 
     out = []
     for name in ("small", "table-ii"):
@@ -188,7 +188,7 @@ def main() -> None:
             f"{100 * r['throughput_cpu']:.0f} %",
         )
     console.print(table)
-    fast = Table(title="fast in-process mode (gcs.fastsim)")
+    fast = Table(title="fast in-process mode (gcs.sim.fastsim)")
     for name in ("mission", "simulated", "wall", "x real time"):
         fast.add_column(name, justify="right")
     for name, simulated, wall in fast_mode():

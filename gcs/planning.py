@@ -41,7 +41,8 @@ from planner.kinematics import (
     safe_speed,
     smoothing_error_bound,
 )
-from planner.search import PathPlan, PathProblem, plan_path
+from planner.search import plan_path
+from planner.types import PathPlan, PathProblem
 from planner.validity import row_refusal
 
 #: Tolerance when comparing a requested speed with the safe speed, m/s.

@@ -15,7 +15,7 @@ Run JSON fields (CONTRACTS.md), all times in mission seconds:
 Extra fields: `reason` (when not completed), `exit_status`, `per_uav` (tracking, control and
 landing errors, final phase), `budget` (smoothing window and bound, worst control error,
 navigation noise, against rho_c), `setpoints` (sent, achieved rate, p99 period jitter), `events`
-(the monitors' errors and warnings), `radio` (when the radio medium ran: `gcs.radio`).
+(the monitors' errors and warnings), `radio` (when the radio medium ran: `gcs.sim.radio`).
 """
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ import shapely
 from planner.formation import ANGLE_TOLERANCE, DISTANCE_TOLERANCE, SQRT2
 
 if TYPE_CHECKING:
-    from planner.search import PathProblem
+    from planner.types import PathProblem
 
 START = 0  #: index of A in `Nodes`
 GOAL = 1  #: index of B in `Nodes`

@@ -23,6 +23,7 @@ import shapely
 
 from planner.formation import row_direction
 from planner.obstacles import Obstacles
+from planner.types import PathProblem
 
 #: Extra clearance (m) random rectangles keep from A, B and the rows, beyond the margin.
 _SPARE = 1.0
@@ -208,8 +209,6 @@ def city_grid(
 
 def scenario_problem(scenario: Scenario, **overrides):
     """A `PathProblem` for `scenario`; keyword arguments override its fields."""
-    from planner.search import PathProblem
-
     fields = dict(
         start=scenario.start,
         goal=scenario.goal,

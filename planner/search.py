@@ -54,7 +54,7 @@ from planner.graph import (
     segments_clear_of_rows,
     wraps_corner,
 )
-from planner.obstacles import Obstacles
+from planner.types import PathPlan, PathProblem
 from planner.validity import (
     PathViolations,
     Refusal,
@@ -65,8 +65,6 @@ from planner.validity import (
 )
 
 __all__ = [
-    "PathPlan",
-    "PathProblem",
     "Refusal",
     "check_path",
     "check_rows",
@@ -75,7 +73,6 @@ __all__ = [
     "precheck_issue",
 ]
 
-METHODS = ("exact", "penalty")
 #: Graphs with more candidate targets than 4x this use radius queries (DESIGN: scale): the
 #: taut graph (used first) and the full graph (the fallback, with more but flatter nodes).
 LOCAL_CANDIDATES = 250
@@ -87,69 +84,6 @@ FULL_CHECK_NODES = 3000
 _LABELS_PER_STATE = 8
 #: At most this many fleet-size rounds (N only grows; rows lengthen each round).
 MAX_FLEET_ROUNDS = 12
-
-
-@dataclass(frozen=True, eq=False)
-class PathProblem:
-    """A planning problem: A, B, parking angles theta_A, theta_B (degrees, counter-clockwise
-    from A->B), rho_c, rho_R, obstacles, parking mode ("segment" or the paper's "ray"), fleet
-    size (None = the minimum of eq. 28, grown with the path), method and caps."""
-
-    start: np.ndarray
-    goal: np.ndarray
-    start_angle_deg: float
-    goal_angle_deg: float
-    safety_margin: float
-    radio_range: float
-    obstacles: Obstacles
-    parking: str = "segment"
-    fleet_size: int | None = None
-    method: str = "exact"
-    max_expansions: int = 2_000_000
-    max_penalty_iterations: int = 50
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "start", np.asarray(self.start, float).reshape(2))
-        object.__setattr__(self, "goal", np.asarray(self.goal, float).reshape(2))
-        if self.parking not in ("segment", "ray"):
-            raise ValueError(f"parking must be 'segment' or 'ray', not {self.parking!r}")
-        if self.method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, not {self.method!r}")
-        if self.fleet_size is not None and self.fleet_size < 1:
-            raise ValueError(f"fleet_size must be >= 1, not {self.fleet_size}")
-
-
-@dataclass(frozen=True, eq=False)
-class PathPlan:
-    """The planner's answer. `reason` (one sentence) says why when `valid` is False; `path`
-    is then empty. `rows` are the parking rows for `fleet_size`. `iterations` counts search
-    rounds of the final graph (1 = the first walk was valid, 2 = the repair search ran;
-    penalty method: rounds of the loop); `level` names that graph ("taut", "full" or
-    "penalty"); `repairs` counts repaired walks. `certified` is True when the length is
-    proven minimal over the full graph of definition 5 (exact method; False when a check was
-    skipped on a large map or the repair search hit its label limit). `node_count` counts
-    graph nodes, `edges_examined` the node pairs considered, `edge_count` the edges found
-    valid against the obstacles (`candidate_edges`, for plots), `expansions` the states taken
-    off the queues; `fleet_rounds` the fleet sizes tried."""
-
-    valid: bool
-    reason: str | None
-    path: np.ndarray
-    length_m: float
-    fleet_size: int
-    min_fleet_size: int
-    rows: ParkingRows
-    iterations: int
-    expansions: int
-    node_count: int
-    edges_examined: int
-    candidate_edges: np.ndarray
-    violations: PathViolations | None = None
-    certified: bool = False
-    level: str = ""
-    repairs: int = 0
-    fleet_rounds: int = 1
-    edge_count: int = 0
 
 
 # ---------------------------------------------------------------------------------------

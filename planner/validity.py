@@ -23,7 +23,7 @@ from planner.formation import (
 )
 
 if TYPE_CHECKING:
-    from planner.search import PathProblem
+    from planner.types import PathProblem
 
 
 def _empty(cols: int) -> np.ndarray:

@@ -207,7 +207,7 @@ def mission_file(folder: Path, **changes) -> Path:
 def simulated_fleet(mission_path: Path, speedup: float, extra: tuple[str, ...] = ()):
     """The simulated vehicles `gcs mission run` would start for this mission (same homes,
     limits, noise, leaders), started by the test instead: a `SimFleet`, not yet started."""
-    from gcs.cmd_run import sim_setup
+    from gcs.cli.cmd_run import sim_setup
     from gcs.drivers.sim import SimFleet
     from gcs.mission import load_mission
     from gcs.planning import plan_mission

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from planner.obstacles import Obstacles
-from planner.search import PathProblem
+from planner.types import PathProblem
 
 #: The safety margin rho_c (m) of the hand-made maps.
 RHO = 5.0

@@ -26,8 +26,8 @@ import gcs.cli
 import vehicles.cli
 from gcs.flight.clock import MissionClock
 from gcs.link import Link
-from gcs.logreader import read_recording
-from gcs.recording import FlightRecorder
+from gcs.logs.logreader import read_recording
+from gcs.logs.recording import FlightRecorder
 from gcs.signing import FleetSigning
 from tests.attacker import codec, mutate, timestamp_now
 from tests.flying import MISSION, Flight, mission_file

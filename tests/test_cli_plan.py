@@ -238,7 +238,7 @@ def test_city_blocks_plan(gcs_main):
 @pytest.mark.slow
 def test_demo_plans_plots_and_flies_the_paper_scenario(tmp_path, monkeypatch, capsys):
     """`make demo`: exit 0 means the nine simulated UAVs flew Table II within every bound."""
-    from gcs import demo
+    from gcs.cli import demo
 
     monkeypatch.chdir(tmp_path)
     assert demo.main() == 0

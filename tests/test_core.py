@@ -3,7 +3,7 @@
 The fast mode drives THE core (`gcs.flight.core.GroundStation`, the drivers of the simulated
 backend) with the lockstep vehicles and radio medium; its clock is the simulation's, so every
 run is deterministic and needs no sleep. Faults (a stalled ground station, a cut link) and
-operator actions are injected at fixed times on the vehicles' clock (`gcs.fastsim.Faults`).
+operator actions are injected at fixed times on the vehicles' clock (`gcs.sim.fastsim.Faults`).
 The mission (`tests/missions/core.yaml`): 4 UAVs, 172 m with one bend, 8 m/s, a scheduled
 change to 5 m/s at 8 s and UAV 2 asking for 8 m/s at 16 s as leader.
 """
@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs.fastsim import FastOptions, Faults, fly_fast
 from gcs.flight.core import STILL_BEFORE_LANDING_S
 from gcs.link import MemoryLink
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
+from gcs.sim.fastsim import FastOptions, Faults, fly_fast
 
 MISSION = Path(__file__).resolve().parent / "missions" / "core.yaml"
 

@@ -11,9 +11,9 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gcs.fastsim import FastOptions, fly_fast
 from gcs.mission import parse_mission
 from gcs.planning import plan_mission
+from gcs.sim.fastsim import FastOptions, fly_fast
 
 
 @st.composite

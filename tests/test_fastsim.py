@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.fastsim import FastOptions, fly_fast
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
-from vehicles.radio_stats import KINDS
+from gcs.sim.fastsim import FastOptions, fly_fast
+from medium.radio_stats import KINDS
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "small.yaml"
 

@@ -40,7 +40,7 @@ MISSION = REPO / "examples" / "small.yaml"
 SPEEDUP = "5"  # the issue allows up to 10; 5 leaves room on a busy 2-core machine
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
-#: Topics every UAV has, and the fleet-wide ones (CONTRACTS.md, MCAP; gcs.recording).
+#: Topics every UAV has, and the fleet-wide ones (CONTRACTS.md, MCAP; gcs.logs.recording).
 UAV_TOPICS = ("/uav{n}/fix", "/uav{n}/target", "/uav{n}/setpoint", "/uav{n}/state",
               "/mavlink/{n}/rx", "/mavlink/{n}/tx")  # fmt: skip
 FLEET_TOPICS = ("/plan", "/scene", "/tf", "/events", "/speed", "/metrics", "/fleet",
@@ -131,7 +131,7 @@ class Read:
 
 @pytest.fixture(scope="module")
 def read(flown) -> Read:
-    """The recording read with `mcap` and `mcap-protobuf-support` only (not gcs.logreader)."""
+    """The recording read with `mcap` and `mcap-protobuf-support` only (not gcs.logs.logreader)."""
     with open(flown.log, "rb") as handle:
         reader = make_reader(handle, decoder_factories=[DecoderFactory(), JsonDecoder()])
         summary = reader.get_summary()
@@ -316,7 +316,7 @@ def test_log_info_reads_a_cut_recording_and_says_so(flown, read, gcs_log, tmp_pa
 
 # --------------------------------------------------------------------------- gcs log report
 def test_log_report_writes_every_figure_and_the_numbers(flown, read, gcs_log, tmp_path):
-    from gcs.report import FIGURES
+    from gcs.logs.report import FIGURES
 
     out_dir = tmp_path / "report"
     code, out, err = gcs_log("log", "report", flown.log, "--out", out_dir)
@@ -353,7 +353,7 @@ def test_log_report_writes_every_figure_and_the_numbers(flown, read, gcs_log, tm
 
 
 def test_log_report_on_a_cut_recording(flown, gcs_log, tmp_path):
-    from gcs.report import FIGURES
+    from gcs.logs.report import FIGURES
 
     data = flown.log.read_bytes()
     cut = tmp_path / "cut.mcap"
@@ -433,9 +433,9 @@ def test_the_flight_was_served_live_with_the_same_channels(flown, read):
 
 
 def test_the_committed_layout_is_current_and_shows_recorded_topics(flown, read):
-    from gcs.layout import LAYOUT_PATH, layout_text
+    from gcs.logs.layout import LAYOUT_PATH, layout_text
 
-    assert LAYOUT_PATH.read_text() == layout_text(), "run python -m gcs.layout"
+    assert LAYOUT_PATH.read_text() == layout_text(), "run python -m gcs.logs.layout"
     layout = json.loads(LAYOUT_PATH.read_text())
     recorded = {m[0] for m in read.messages}
     panels = []

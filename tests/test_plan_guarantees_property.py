@@ -19,7 +19,8 @@ from planner.formation import DISTANCE_TOLERANCE, min_radio_range
 from planner.guarantees import check_positions
 from planner.kinematics import LineFormation, SpeedProfile
 from planner.obstacles import Obstacles
-from planner.search import PathProblem, plan_path
+from planner.search import plan_path
+from planner.types import PathProblem
 
 SAMPLE_RATE_HZ = 10.0
 

@@ -15,7 +15,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from planner.obstacles import Obstacles
-from planner.search import PathProblem, plan_path
+from planner.search import plan_path
+from planner.types import PathProblem
 
 RHO = 5.0
 TOL = 1e-6

@@ -9,7 +9,7 @@ import pytest
 
 from planner.formation import parking_rows
 from planner.obstacles import Obstacles
-from planner.search import PathProblem
+from planner.types import PathProblem
 from planner.validity import check_path, check_rows, precheck
 from tests.planner_maps import RHO, problem, square
 

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from vehicles.medium_cli import main as medium_main
+from medium.cli import main as medium_main
 from vehicles.testing import GroundStation, VehicleProcess, free_udp_ports, local_of
 
 REPO = Path(__file__).resolve().parents[1]
@@ -29,12 +29,12 @@ pytestmark = pytest.mark.timeout(90)
 
 
 class MediumProcess:
-    """`python -m vehicles.medium_cli ...` as a subprocess (context manager)."""
+    """`python -m medium.cli ...` as a subprocess (context manager)."""
 
     def __init__(self, args: list[str]) -> None:
         self._stderr = tempfile.TemporaryFile(mode="w+")
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "vehicles.medium_cli", *args],
+            [sys.executable, "-m", "medium.cli", *args],
             cwd=REPO,
             stdout=subprocess.DEVNULL,
             stderr=self._stderr,

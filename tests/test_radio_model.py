@@ -13,11 +13,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from medium.ground_users import CbrTraffic, GroundUser
+from medium.medium import MediumModel, frames, sim_state_position
+from medium.radio import Channel, DelayLine, RadioConfig, topology
+from medium.radio_stats import RadioStats
 from vehicles.frames import GeodeticOrigin
-from vehicles.ground_users import CbrTraffic, GroundUser
-from vehicles.medium import MediumModel, frames, sim_state_position
-from vehicles.radio import Channel, DelayLine, RadioConfig, topology
-from vehicles.radio_stats import RadioStats
 
 ORIGIN = GeodeticOrigin(45.7640, 4.8357, 170.0)
 coordinate = st.floats(-300, 300, allow_nan=False)

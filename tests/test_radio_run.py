@@ -19,9 +19,9 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from gcs.fastsim import fly_fast
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
+from gcs.sim.fastsim import fly_fast
 
 REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "examples" / "small.yaml"
@@ -31,8 +31,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 #: radio medium itself is the one `gcs mission run` starts).
 LAUNCH = """
 import os, sys
-import gcs.cli, gcs.cmd_run as run
-from gcs.fastsim import with_fleet_size
+import gcs.cli, gcs.cli.cmd_run as run
+from gcs.sim.fastsim import with_fleet_size
 plan = run.plan_mission
 def plan_mission(mission, **kwargs):
     p = plan(mission, **kwargs)

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import gcs.cli
-import gcs.cmd_mission
+import gcs.cli.cmd_mission
 
 REPO = Path(__file__).resolve().parents[1]
 SMALL = REPO / "examples" / "small.yaml"

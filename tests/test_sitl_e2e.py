@@ -15,7 +15,7 @@ import yaml
 
 from gcs.geodesy import geodetic_to_enu
 from gcs.mission import load_mission
-from gcs.sitl import launch_plan, plan_for_launch
+from gcs.sim.sitl import launch_plan, plan_for_launch
 from tests.fakes.ardupilot import ArduCopterModel
 from tests.fakes.common import FakeEndpoint, Home, enu_to_global
 from tests.fakes.px4 import Px4Model

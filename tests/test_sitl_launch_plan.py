@@ -18,7 +18,7 @@ from gcs import cli
 from gcs.geodesy import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
-from gcs.sitl import plan_for_launch, slot_poses
+from gcs.sim.sitl import plan_for_launch, slot_poses
 from tests.conftest import EXAMPLES, MISSIONS
 
 TABLE_II = EXAMPLES / "table-ii.yaml"
@@ -27,8 +27,8 @@ TABLE_II = EXAMPLES / "table-ii.yaml"
 @pytest.fixture
 def sitl(gcs_main, monkeypatch):
     """`gcs ...` in-process, with the `sitl` group registered (cli.GROUPS lists it)."""
-    if "gcs.cmd_sitl" not in cli.GROUPS:
-        monkeypatch.setattr(cli, "GROUPS", (*cli.GROUPS, "gcs.cmd_sitl"))
+    if "gcs.cli.cmd_sitl" not in cli.GROUPS:
+        monkeypatch.setattr(cli, "GROUPS", (*cli.GROUPS, "gcs.cli.cmd_sitl"))
     return gcs_main
 
 

@@ -22,11 +22,11 @@ import numpy as np
 
 from fleetwire.messages import MISSION_TIME_NAME, encode_mission_time
 from fleetwire.modes import COPTER_MODE, COPTER_MODE_NAME
-from gcs.children import start_child
 from gcs.drivers.base import CommandSpec, Driver, Fleet, FleetProblem, FlightMode
 from gcs.geodesy import Origin
 from gcs.link import mavutil
-from gcs.radio import MediumProcess, MediumSetup
+from gcs.sim.children import start_child
+from gcs.sim.radio import MediumProcess, MediumSetup
 from vehicles.ports import free_udp_ports
 
 log = logging.getLogger(__name__)
@@ -119,7 +119,7 @@ class SimVehicleSetup:
     leaders: dict[int, list[tuple[float, float]]] = field(default_factory=dict)
     extra_args: tuple[str, ...] = ()
     log_dir: Path | None = None  # where each process's stderr goes (None: discarded)
-    radio: MediumSetup | None = None  # links through the radio medium (gcs.radio); None: direct
+    radio: MediumSetup | None = None  # links through the radio medium (gcs.sim.radio); None: direct
 
     def groups(self) -> list[list[int]]:
         """UAV indexes (0-based) per process: runs of consecutive UAVs (a process numbers its

@@ -3,7 +3,7 @@
 The loop that drives it passes its time `now` (the live loop's monotonic wall clock, the fast
 mode's simulated seconds) and what arrived, and the core answers through its drivers (which
 write to the links they were given) and its recorder. Two loops drive this one core:
-`gcs.flight.live` (selectors over UDP links, the wall clock) and `gcs.fastsim` (the lockstep
+`gcs.flight.live` (selectors over UDP links, the wall clock) and `gcs.sim.fastsim` (the lockstep
 vehicles and radio medium in process, in-memory links). The loop calls, in order:
 
 * `receive(now, batches)`: every valid message read from each UAV's link (a stall of the loop
@@ -52,7 +52,7 @@ from gcs.flight.clock import MissionClock, VehicleClock, paused
 from gcs.geodesy import enu_to_geodetic
 from gcs.link import mavutil
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
-from gcs.radio import run_json_radio
+from gcs.sim.radio import run_json_radio
 from gcs.speed import (
     ScheduledChange,
     SpeedChange,
@@ -199,7 +199,7 @@ class _NoView:
 
 
 class Recorder(Protocol):
-    """What the runtime records (gcs.recording.FlightRecorder implements it)."""
+    """What the runtime records (gcs.logs.recording.FlightRecorder implements it)."""
 
     def setpoint(self, uav: int, payload: dict, wall: float) -> None: ...
 

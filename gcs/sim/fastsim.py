@@ -4,7 +4,7 @@ The ground station is THE ground-station core (`gcs.flight.core.GroundStation`) 
 simulated backend's drivers (`gcs.drivers.sim.SimDriver`), exactly as `gcs mission run` flies
 it; only the loop around it differs. Instead of sockets and the wall clock: the same vehicles
 as the networked simulation (`vehicles.lockstep`: the dynamics and the ArduCopter-like
-autopilots of `vehicles sim`), the same radio medium model (`vehicles.medium.MediumModel`:
+autopilots of `vehicles sim`), the same radio medium model (`medium.medium.MediumModel`:
 unit-disk graph on the true positions, per-hop latency, jitter and loss, ground users and UAV
 data), in-memory links (`gcs.link.MemoryLink`), and simulated time as the loop's clock. Every
 MAVLink message goes through the medium: a packet with no path is dropped, the others arrive
@@ -30,18 +30,18 @@ from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, NullRecorder, RunOptions, RunResult
 from gcs.link import MemoryLink
 from gcs.planning import MissionPlan
-from gcs.radio import run_json_radio
+from gcs.sim.radio import run_json_radio
 from gcs.summary import run_json
+from medium.ground_users import DEFAULT_PACKET_BYTES, GroundUser
+from medium.medium import MediumModel
+from medium.radio import DelayLine, RadioConfig
 from planner.guarantees import GuaranteeSamples, check_positions
 from planner.kinematics import LineFormation, SpeedProfile
 from vehicles.autopilot import AutopilotConfig
 from vehicles.dynamics import Airframe, Disturbances, DynamicsConfig
 from vehicles.fleet_speed import LeaderRequest
 from vehicles.frames import GeodeticOrigin
-from vehicles.ground_users import DEFAULT_PACKET_BYTES, GroundUser
 from vehicles.lockstep import QUIET_STREAMS, LockstepConfig, LockstepFleet
-from vehicles.medium import MediumModel
-from vehicles.radio import DelayLine, RadioConfig
 
 #: Streams the vehicles skip in the fast mode: what the core does not read.
 FAST_QUIET_STREAMS = tuple(
@@ -100,7 +100,7 @@ class FastRun:
     `times` (T,) mission seconds of the samples; `positions` (T, N, 3) true; `hops` (T, N)
     from the medium (-1: no path); `checks` the planner's sampled guarantee metrics;
     `tracking_error_m` (T, N) |true - V_n(t)|; `packets` the medium's packet log (time in
-    mission s; `kind` indexes `vehicles.radio_stats.KINDS`); `speed_changes` each change with
+    mission s; `kind` indexes `medium.radio_stats.KINDS`); `speed_changes` each change with
     the mission time each UAV received it (`received_s`) and, for a leader's request, the time
     the leader sent it (`leader_sent_s`); `takeoff_s` and `landed_s` (N,) mission times (NaN:
     never); `operator_answers` the answers to `Faults.operator_requests`; `stalls` the core's

@@ -1,6 +1,6 @@
 """`gcs mission run FILE`: plan, connect (starting the simulated fleet), fly, land, summarise.
 
-Registered under `gcs mission` (through `gcs.cmd_mission.SUBCOMMANDS`). Exit statuses
+Registered under `gcs mission` (through `gcs.cli.cmd_mission.SUBCOMMANDS`). Exit statuses
 (CONTRACTS.md): 0 completed, 1 aborted or a safety bound broken (or no valid path), 2 bad
 input. With `--json` exactly one JSON object goes to stdout (the run JSON, also on exit 1) and
 human text to stderr.
@@ -30,11 +30,11 @@ from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, RunOptions
 from gcs.flight.live import LiveLoop
 from gcs.link import Link
+from gcs.logs.recording import FlightRecorder, LiveServerError
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
-from gcs.radio import medium_setup
-from gcs.recording import FlightRecorder, LiveServerError
 from gcs.signing import RunSigning
+from gcs.sim.radio import medium_setup
 from gcs.speed import OperatorSocket, socket_path_for
 from gcs.summary import EXIT_ABORTED, exit_status, run_json, summary_renderable
 
@@ -46,7 +46,7 @@ MAX_SPEEDUP = 100.0
 
 def register(mission_commands: argparse._SubParsersAction) -> None:
     """Add `gcs mission run`."""
-    from gcs.cmd_mission import add_planning_arguments
+    from gcs.cli.cmd_mission import add_planning_arguments
 
     run = mission_commands.add_parser(
         "run",
@@ -258,7 +258,7 @@ def run_command(args: argparse.Namespace) -> int:
             drivers.append(family(spec, link, timing))
         view = None
         if stderr_tty and not args.json and not args.no_live:
-            from gcs.liveview import LiveView
+            from gcs.cli.liveview import LiveView
 
             view = LiveView(Console(stderr=True))
             stack.callback(view.close)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vehicles.radio import Topology
+from medium.radio import Topology
 
 KINDS = ("uplink", "downlink", "uav_data", "ground")
 _KIND_CODE = {kind: code for code, kind in enumerate(KINDS)}

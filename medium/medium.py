@@ -1,5 +1,5 @@
 """The radio medium process: forwards MAVLink between the ground station and each UAV only
-while a multi-hop radio path exists (the simulated world's network; model in `vehicles.radio`).
+while a multi-hop radio path exists (the simulated world's network; model in `medium.radio`).
 
 For UAV k the medium listens on its own UDP port (the ground station's link to UAV k points
 there) and talks to the vehicle's port from that same socket, so the vehicle replies to it.
@@ -16,7 +16,7 @@ JSON's `radio` object, the instant's hops and positions, the recent packets' del
 to `report`.
 
 `MediumModel` is the medium without its sockets (positions, paths, each packet's fate, data
-sources, counters): this process and the fast in-process mode (`gcs.fastsim`) both run it.
+sources, counters): this process and the fast in-process mode (`gcs.sim.fastsim`) both run it.
 """
 
 from __future__ import annotations
@@ -34,16 +34,16 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from fleetwire.frames import frames
-from vehicles.frames import GeodeticOrigin
-from vehicles.ground_users import (
+from medium.ground_users import (
     DEFAULT_PACKET_BYTES,
     CbrTraffic,
     GroundUser,
     GroundUsers,
     offer,
 )
-from vehicles.radio import Channel, DelayLine, RadioConfig, Topology, topology
-from vehicles.radio_stats import RadioStats
+from medium.radio import Channel, DelayLine, RadioConfig, Topology, topology
+from medium.radio_stats import RadioStats
+from vehicles.frames import GeodeticOrigin
 
 log = logging.getLogger(__name__)
 
@@ -112,7 +112,7 @@ def sim_state_position(
 class MediumModel:
     """The medium's decisions without sockets: where the UAVs are, which paths exist, each
     packet's hops and fate, the data sources and the counters. The medium process and the fast
-    in-process mode (`gcs.fastsim`) both run this."""
+    in-process mode (`gcs.sim.fastsim`) both run this."""
 
     def __init__(
         self,

@@ -2,7 +2,7 @@
 
 `medium_setup(mission)` says what the medium needs from the mission (base stations A, B and
 the extra ones, radio range, the `radio:` section, ground users, seed); `MediumProcess` starts
-`python -m vehicles.medium_cli` between the GCS and the vehicle processes, always stops it,
+`python -m medium.cli` between the GCS and the vehicle processes, always stops it,
 and collects its periodic reports (JSON datagrams on a loopback UDP socket: never blocking,
 whoever reads them or not). The last report is the run JSON's `radio` object (CONTRACTS.md).
 """
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs.children import start_child
+from gcs.sim.children import start_child
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +96,7 @@ class MediumProcess:
         self._reports.setblocking(False)
         report_port = self._reports.getsockname()[1]
         cmd = [
-            sys.executable, "-m", "vehicles.medium_cli",
+            sys.executable, "-m", "medium.cli",
             "--count", str(len(vehicle_ports)),
             "--base-port", str(listen_port),
             "--vehicle-ports", ",".join(map(str, vehicle_ports)),
@@ -119,7 +119,7 @@ class MediumProcess:
         log.info("starting %s", " ".join(cmd))
         stderr = open(stderr_path, "wb") if stderr_path else subprocess.DEVNULL  # noqa: SIM115
         try:
-            self.process = start_child(cmd, root=Path(__file__).resolve().parents[1], stderr=stderr)
+            self.process = start_child(cmd, root=Path(__file__).resolve().parents[2], stderr=stderr)
         except OSError:
             self._reports.close()
             raise

@@ -1,4 +1,4 @@
-"""Command line of the radio medium: ``python -m vehicles.medium_cli --count N --base-port P
+"""Command line of the radio medium: ``python -m medium.cli --count N --base-port P
 --vehicle-ports Q1,...,QN --stations "x,y;..." --range R ...``.
 
 UAV k (0-based) is system `sysid-base + k`; the medium listens for its ground station on UDP
@@ -21,13 +21,13 @@ import socket
 import sys
 from collections.abc import Sequence
 
+from medium.ground_users import DEFAULT_PACKET_BYTES, DEFAULT_RATE_BPS, GroundUser
+from medium.medium import Medium, MediumConfig, MediumPortInUse, MediumUav
+from medium.radio import RadioConfig
 from vehicles.cli import InputError, _home, _integer, _Parser, _positive
-from vehicles.ground_users import DEFAULT_PACKET_BYTES, DEFAULT_RATE_BPS, GroundUser
-from vehicles.medium import Medium, MediumConfig, MediumPortInUse, MediumUav
-from vehicles.radio import RadioConfig
 from vehicles.sim import DEFAULT_ORIGIN
 
-PROG = "vehicles.medium_cli"
+PROG = "medium.cli"
 
 
 def _ports(text: str) -> list[int]:

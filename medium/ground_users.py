@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vehicles.radio import Channel, Topology
-from vehicles.radio_stats import RadioStats
+from medium.radio import Channel, Topology
+from medium.radio_stats import RadioStats
 
 DEFAULT_PACKET_BYTES = 200
 DEFAULT_RATE_BPS = 800.0

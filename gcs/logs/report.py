@@ -35,14 +35,14 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from gcs import plot  # noqa: E402
 from gcs.errors import InputError  # noqa: E402
-from gcs.logreader import Recording  # noqa: E402
+from gcs.logs.logreader import Recording  # noqa: E402
 from gcs.mission import Mission, parse_mission  # noqa: E402
 from gcs.planning import MissionPlan  # noqa: E402
 from planner.formation import ParkingRows  # noqa: E402
 from planner.guarantees import check_positions  # noqa: E402
 from planner.kinematics import LineFormation, SpeedProfile  # noqa: E402
 from planner.obstacles import Obstacles  # noqa: E402
-from planner.search import PathPlan  # noqa: E402
+from planner.types import PathPlan  # noqa: E402
 
 #: The figures `write_report` draws (file name -> what it shows).
 FIGURES = {

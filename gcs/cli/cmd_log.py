@@ -17,7 +17,7 @@ from rich.console import Console
 from rich.table import Table
 
 from gcs.errors import InputError
-from gcs.logreader import Recording, read_recording
+from gcs.logs.logreader import Recording, read_recording
 
 EXIT_OK = 0
 
@@ -168,7 +168,7 @@ def info_command(args: argparse.Namespace) -> int:
 
 # --------------------------------------------------------------------------- report
 def report_command(args: argparse.Namespace) -> int:
-    from gcs.report import write_report
+    from gcs.logs.report import write_report
 
     out = args.out
     if out.exists() and not out.is_dir():
@@ -195,7 +195,7 @@ def _metres(value: float | None) -> str:
 
 # --------------------------------------------------------------------------- replay
 def replay_command(args: argparse.Namespace) -> int:
-    from gcs.replay import ReplayError, open_output, recorded_frames, replay
+    from gcs.logs.replay import ReplayError, open_output, recorded_frames, replay
 
     if not (math.isfinite(args.rate) and args.rate > 0):
         raise InputError(None, "--rate", f"a number > 0, got {args.rate:g}")

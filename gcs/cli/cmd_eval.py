@@ -1,4 +1,4 @@
-"""`gcs eval paper [--out DIR]`: the paper's network evaluation in the fast mode (`gcs.eval`).
+"""`gcs eval paper [--out DIR]`: the paper's network evaluation in the fast mode (`gcs.sim.eval`).
 
 Exit statuses (CONTRACTS.md): 0 every run completed with its fleet connected the whole
 mission, 1 otherwise (the figures and the table are written either way), 2 bad input.
@@ -16,8 +16,8 @@ from rich.console import Console
 from rich.table import Table
 
 from gcs.errors import InputError
-from gcs.eval import DEFAULT_MISSION, EvalPlan, run_all, write_figures, write_results
 from gcs.mission import load_mission
+from gcs.sim.eval import DEFAULT_MISSION, EvalPlan, run_all, write_figures, write_results
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

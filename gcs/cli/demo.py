@@ -1,4 +1,5 @@
-"""`python -m gcs.demo` (`make demo`): plan the paper's scenario and fly it on the simulated fleet.
+"""`python -m gcs.cli.demo` (`make demo`): plan the paper's scenario and fly it on the simulated
+fleet.
 
 Plans `examples/table-ii.yaml` and draws it into `logs/demo-plan.png`, then flies it with nine
 simulated vehicles (one process) at 5x real time, about a minute and a half: the recording goes
@@ -12,7 +13,7 @@ from pathlib import Path
 
 from gcs import cli
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "table-ii.yaml"
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "table-ii.yaml"
 PLOT = Path("logs") / "demo-plan.png"
 SPEEDUP = 5
 

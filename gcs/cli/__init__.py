@@ -1,6 +1,6 @@
 """`gcs`: the ground-control station's command line (argparse).
 
-Each command group lives in its own module `gcs/cmd_<group>.py` exposing
+Each command group lives in its own module `gcs/cli/cmd_<group>.py` exposing
 `register(subparsers)`: it adds its parser(s) and sets `handler=func` on each leaf, where
 `func(args) -> int` returns the exit status. Adding a group is one line in `GROUPS`.
 
@@ -21,11 +21,11 @@ from gcs.errors import EXIT_BAD_INPUT, InputError
 
 #: Command-group modules, each with `register(subparsers)`. Add a group here.
 GROUPS: tuple[str, ...] = (
-    "gcs.cmd_mission",
-    "gcs.cmd_speed",
-    "gcs.cmd_log",
-    "gcs.cmd_sitl",
-    "gcs.cmd_eval",
+    "gcs.cli.cmd_mission",
+    "gcs.cli.cmd_speed",
+    "gcs.cli.cmd_log",
+    "gcs.cli.cmd_sitl",
+    "gcs.cli.cmd_eval",
 )
 
 
@@ -76,7 +76,3 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,7 +1,7 @@
 """`gcs eval paper`: the paper's network evaluation (sec. V-VI, figs. 8-16), in the fast mode.
 
 The paper's scenario (Table II, `examples/table-ii.yaml`: 9 UAVs, rho_c 5 m, rho_R 220 m, six
-ground users, 0.8 kbps of data per source) is flown by `gcs.fastsim`:
+ground users, 0.8 kbps of data per source) is flown by `gcs.sim.fastsim`:
 
 * at a fixed formation speed of 2, 5 and 10 m/s (figs. 13, 16; D_min "very similar to figs.
   8-9"), and
@@ -32,12 +32,12 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from gcs.fastsim import FastOptions, FastRun, fly_fast  # noqa: E402
 from gcs.mission import Mission, SpeedChange, SpeedSchedule, load_mission  # noqa: E402
 from gcs.planning import plan_mission  # noqa: E402
-from vehicles.radio_stats import KINDS  # noqa: E402
+from gcs.sim.fastsim import FastOptions, FastRun, fly_fast  # noqa: E402
+from medium.radio_stats import KINDS  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 DEFAULT_MISSION = REPO / "examples" / "table-ii.yaml"
 DPI = 110
 UAV_DATA, GROUND = KINDS.index("uav_data"), KINDS.index("ground")

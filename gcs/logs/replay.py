@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from gcs.errors import InputError
 from gcs.link import GCS_SYSTEM_ID, mavutil
-from gcs.logreader import Recording
+from gcs.logs.logreader import Recording
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """`gcs sitl launch-plan FILE --autopilot ardupilot|px4`: print the commands that start one SITL
 instance per UAV (home on its parking slot, its system id, its ports) and the matching
-`fleet.connections` (see `gcs.sitl`). Exit 0; 1 when the mission has no valid path; 2 on bad
+`fleet.connections` (see `gcs.sim.sitl`). Exit 0; 1 when the mission has no valid path; 2 on bad
 input.
 """
 
@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from gcs.mission import load_mission
-from gcs.sitl import AUTOPILOTS, NoValidPath, launch_plan, render
+from gcs.sim.sitl import AUTOPILOTS, NoValidPath, launch_plan, render
 
 EXIT_OK, EXIT_NO_PATH = 0, 1
 

@@ -4,7 +4,7 @@ Topics. Foxglove's well-known schemas (protobuf), so its panels work without con
 * `/uav<n>/fix` (`foxglove.LocationFix`): the position UAV n reports (Map panel);
   `/uav<n>/target`: the setpoint streamed to it, same type;
 * `/scene` (`foxglove.SceneUpdate`): obstacles, margins, planned path, parking rows, base
-  stations, ground users, UAVs, virtual targets and radio links (see `gcs.scene`);
+  stations, ground users, UAVs, virtual targets and radio links (see `gcs.logs.scene`);
 * `/tf` (`foxglove.FrameTransforms`): `map -> uav<n>` and `map -> uav<n>/target` every tick;
 * `/events` (`foxglove.Log`); `/map/obstacles` and `/map/plan` (`foxglove.GeoJSON`, lon/lat:
   building footprints and walls; path, rows, stations), repeated every `GEOJSON_PERIOD_S`.
@@ -54,7 +54,7 @@ import yaml
 from foxglove.channels import FrameTransformsChannel, GeoJsonChannel, LocationFixChannel, LogChannel
 from foxglove.messages import GeoJson, LocationFix, Log, LogLevel, SceneUpdate, Timestamp
 
-from gcs import scene
+from gcs.logs import scene
 
 #: Recording profile written in the MCAP header.
 PROFILE = "fleetline"

@@ -20,7 +20,7 @@ from gcs.mission import load_mission
 from gcs.planning import MissionPlan, plan_json, plan_mission
 
 #: Modules adding `gcs mission <command>`, each with `register(mission_subparsers)`.
-SUBCOMMANDS: tuple[str, ...] = ("gcs.cmd_run",)
+SUBCOMMANDS: tuple[str, ...] = ("gcs.cli.cmd_run",)
 
 #: File types `--plot` writes (matplotlib back ends).
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")

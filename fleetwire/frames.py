@@ -50,16 +50,17 @@ def frames(datagram: bytes) -> list[tuple[int, int, bytes]]:
 
 def newest_telemetry(datagrams: list[bytes], keep: int) -> list[bytes]:
     """A backlog of datagrams (oldest first) without its stale telemetry: of each streamed
-    message (`STREAMED`, one frame a datagram) only the newest `keep`; everything else (acks,
-    texts, commands, several frames, anything unreadable) stays, in order."""
-    seen: dict[int, int] = {}
+    message (`STREAMED`, one frame a datagram) of each system, only the newest `keep`;
+    everything else (acks, texts, commands, several frames, anything unreadable) stays, in
+    order."""
+    seen: dict[tuple[int, int], int] = {}
     kept = []
     for data in reversed(datagrams):
         found = frames(data)
         if len(found) == 1 and found[0][0] in STREAMED:
-            msgid = found[0][0]
-            seen[msgid] = seen.get(msgid, 0) + 1
-            if seen[msgid] > keep:
+            key = found[0][:2]  # (message id, system id)
+            seen[key] = seen.get(key, 0) + 1
+            if seen[key] > keep:
                 continue
         kept.append(data)
     kept.reverse()

@@ -27,6 +27,17 @@ REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "examples" / "small.yaml"
 
 
+def flight_speedup(nominal: float) -> float:
+    """The speed-up a test flight asks for: `nominal` when the machine has a core to spare,
+    lower when it has not (the 1-minute load average, taken when the test module is loaded):
+    on a busy machine a flight slows down, its guarantees (rho_c) stay what they are. At most
+    2.5 times lower, so that a flight still ends in reasonable time."""
+    cores = os.cpu_count() or 1
+    spare = cores - os.getloadavg()[0]
+    share = min(max(spare / max(cores - 1, 1), 0.4), 1.0)
+    return round(nominal * share, 1)
+
+
 def gcs_command(*args: str) -> list[str]:
     """`python -m gcs ARGS` (the console script's code) as a real subprocess command line."""
     return [sys.executable, "-m", "gcs", *args]

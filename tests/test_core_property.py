@@ -19,7 +19,7 @@ from gcs.sim.fastsim import FastOptions, fly_fast
 @st.composite
 def missions(draw):
     rho = draw(st.sampled_from([3.0, 4.0, 5.0]))
-    length = draw(st.floats(100.0, 180.0))
+    length = draw(st.floats(90.0, 140.0))
     heading = draw(st.floats(-math.pi, math.pi))
     goal = [length * math.cos(heading), length * math.sin(heading)]
     middle = np.array(goal) / 2
@@ -34,7 +34,7 @@ def missions(draw):
         "safety_margin": rho,
         "radio_range": draw(st.floats(2 * (1 + math.sqrt(2)) * rho + 5, 80.0)),
         "altitude": draw(st.sampled_from([8.0, 12.0])),
-        "speed": {"max": draw(st.floats(3.0, 8.0)), "cap_to_safe": True},
+        "speed": {"max": draw(st.floats(4.0, 8.0)), "cap_to_safe": True},
         "vehicle": {"max_speed": 12, "max_acceleration": 8, "radius": 0.5},
         "obstacles": [{"rectangle": {"center": center.tolist(), "size": [20, 20]}}],
         "sim": {"seed": draw(st.integers(0, 1000))},
@@ -43,7 +43,7 @@ def missions(draw):
 
 
 @settings(
-    max_examples=4,
+    max_examples=3,
     derandomize=True,
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],

@@ -28,6 +28,7 @@ from tests.flying import (
     alive,
     children_running,
     environment,
+    flight_speedup,
     gcs_command,
     mission_file,
     read_log,
@@ -71,7 +72,7 @@ def vehicle_pids(gcs_pid: int) -> list[int]:
 
 
 # --------------------------------------------------------------------------- attacker + freeze
-FREEZE_SPEEDUP = 5
+FREEZE_SPEEDUP = flight_speedup(5)
 FREEZE_MISSION_S = 3.0
 
 
@@ -224,7 +225,7 @@ def poke(conn) -> None:
 
 
 def test_a_killed_ground_station_leaves_uavs_that_hold_land_and_exit(tmp_path: Path):
-    speedup = 10
+    speedup = flight_speedup(10)
     mission = mission_file(tmp_path, signing={"key_file": "fleet.key"})
     key = load_or_create_key(tmp_path / "fleet.key").key  # the GCS uses it; so do we
     log = tmp_path / "killed.mcap"
@@ -286,7 +287,7 @@ def test_a_killed_ground_station_leaves_uavs_that_hold_land_and_exit(tmp_path: P
 
 # --------------------------------------------------------------------------- a lossy network
 def test_with_30_percent_loss_and_reordering_the_mission_completes_within_rho_c(tmp_path: Path):
-    speedup = 5
+    speedup = flight_speedup(5)
     mission = mission_file(tmp_path, signing={"key_file": "fleet.key"})
     key_path = tmp_path / "fleet.key"
     load_or_create_key(key_path)
@@ -347,7 +348,7 @@ def nan_true_positions(key: bytes, uav: int, after: list[bool]):
 
 
 def test_a_uav_reporting_nan_positions_is_refused_and_everyone_lands(tmp_path: Path):
-    speedup = 10
+    speedup = flight_speedup(10)
     mission = mission_file(tmp_path, signing={"key_file": "fleet.key"})
     key_path = tmp_path / "fleet.key"
     key = load_or_create_key(key_path).key

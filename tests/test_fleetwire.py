@@ -64,3 +64,28 @@ def test_a_speed_change_decodes_to_what_was_encoded():
     assert (leader.effective_s, leader.sequence) == (None, 0)  # at once, unsequenced
     takeoff = mavlink.MAVLink_command_long_message(1, 1, 22, 0, 0, 0, 0, 0, 0, 0, 10)
     assert messages.decode_speed_change(wire(takeoff)) is None
+
+
+def test_a_backlog_keeps_the_newest_telemetry_of_each_system_and_every_other_frame():
+    """Of a backlog, each system's streamed telemetry is shed but for the newest two of each
+    message; an acknowledgement and a text in the middle, and a frame of another system,
+    stay, in their order."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    from fleetwire.frames import frames, newest_telemetry
+
+    def frame(sysid, build):
+        codec = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1)
+        return build(codec).pack(codec)
+
+    def beat(sysid, status):
+        return frame(sysid, lambda c: c.heartbeat_encode(2, 3, 0, 4, status))
+
+    backlog = [beat(1, k % 8) for k in range(100)]
+    ack = frame(1, lambda c: c.command_ack_encode(176, 0, 0, 0, 255, 190))
+    text = frame(1, lambda c: c.statustext_encode(4, b"Guided: no setpoint"))
+    stranger = beat(7, 5)
+    backlog[50:50] = [ack, text, stranger]
+    kept = newest_telemetry(backlog, keep=2)
+    assert kept == [ack, text, stranger, backlog[-2], backlog[-1]]
+    assert [frames(d)[0][:2] for d in kept] == [(77, 1), (253, 1), (0, 7), (0, 1), (0, 1)]

@@ -22,6 +22,7 @@ from mcap.reader import make_reader
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
 from gcs.sim.fastsim import fly_fast
+from tests.flying import flight_speedup
 
 REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "examples" / "small.yaml"
@@ -49,7 +50,7 @@ def fly(tmp_path: Path, *extra: str, fleet_size: int | None = None) -> tuple[int
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
     if fleet_size is not None:
         env["FLEETLINE_TEST_FLEET_SIZE"] = str(fleet_size)
-    args = ["mission", "run", str(MISSION), "--speedup", "5", "--vehicles-per-process", "4",
+    args = ["mission", "run", str(MISSION), "--speedup", str(flight_speedup(5)), "--vehicles-per-process", "4",
             "--json", "--log", str(log), *extra]  # fmt: skip
     done = subprocess.run(
         [sys.executable, "-c", LAUNCH, *args],

@@ -16,11 +16,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.flying import Flight, children_running, environment, gcs_command, read_log
+from tests.flying import (
+    Flight,
+    children_running,
+    environment,
+    flight_speedup,
+    gcs_command,
+    read_log,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "examples" / "small.yaml"
-SPEEDUP = "5"  # the Done-when allows up to 10; 5 leaves room on a busy 2-core machine
+SPEEDUP = str(flight_speedup(5))  # lower on a busy machine (tests/flying.py)
 #: UAV 2 (the leader) gets a process of its own anyway: [1], [2], [3, 4]
 PER_PROCESS = ("--vehicles-per-process", "4")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from gcs.link import Link, mavutil
+from gcs.link import BACKLOG_DATAGRAMS, Link, mavutil
 
 # Every test here starts a process or flies over UDP.
 pytestmark = pytest.mark.slow
@@ -57,8 +57,8 @@ def test_liveness_counts_only_the_expected_system_and_survives_garbage():
 
         rng = random.Random(4)
         sent = 0
-        for _ in range(10):  # in bursts the socket buffer holds
-            for _ in range(50):
+        for _ in range(20):  # in bursts below a backlog (`gcs.link.BACKLOG_DATAGRAMS`)
+            for _ in range(BACKLOG_DATAGRAMS // 2 - 1):
                 size = rng.randrange(1, 300)
                 vehicle.sendto(bytes(rng.randrange(256) for _ in range(size)), gcs_address)
                 # right after garbage, a valid datagram from another system: not our UAV

@@ -19,6 +19,7 @@ from gcs.sim.sitl import launch_plan, plan_for_launch
 from tests.fakes.ardupilot import ArduCopterModel
 from tests.fakes.common import FakeEndpoint, Home, enu_to_global
 from tests.fakes.px4 import Px4Model
+from tests.flying import flight_speedup
 from vehicles.ports import free_udp_ports
 
 pytestmark = pytest.mark.slow
@@ -38,7 +39,7 @@ MISSION = {
 }
 #: The fakes run in threads of this process, beside the GCS: at 10x, 0.1 s of CPU starvation
 #: would be 1 s of mission time. (PX4's offboard-loss timeout stays 1 s wall.)
-SPEEDUP = {"ardupilot": 5.0, "px4": 5.0}
+SPEEDUP = {"ardupilot": flight_speedup(5.0), "px4": flight_speedup(5.0)}
 
 
 @pytest.fixture

@@ -59,7 +59,35 @@ class LinkCounters:
     sent: int = 0
 
 
-class Link:
+class _Liveness:
+    """What every link keeps of what it receives: counters, the system ids heard, and the time
+    of the last valid message of the expected system (CONTRACTS.md: a link is alive while any
+    valid message arrives from that system id)."""
+
+    def __init__(self, url: str, system_id: int) -> None:
+        self.url = url
+        self.system_id = system_id
+        self.counters = LinkCounters()
+        self.last_valid_time: float | None = None
+        self.seen_system_ids: set[int] = set()
+
+    def _admit(self, message, now: float) -> bool:
+        """Whether a valid `message` is from this UAV; counts it and keeps the link alive."""
+        source = message.get_srcSystem()
+        self.seen_system_ids.add(source)
+        if source != self.system_id:
+            self.counters.foreign += 1
+            return False
+        self.counters.received += 1
+        self.last_valid_time = now
+        return True
+
+    def silent_for(self, now: float) -> float:
+        """Seconds since the last valid message; infinite before the first one."""
+        return float("inf") if self.last_valid_time is None else now - self.last_valid_time
+
+
+class Link(_Liveness):
     """A per-UAV MAVLink connection (any mavutil connection string, e.g. `udpout:127.0.0.1:P`).
 
     `system_id` is the UAV's expected system id: messages from other systems are counted and
@@ -75,12 +103,8 @@ class Link:
         source_system: int = GCS_SYSTEM_ID,
         source_component: int = GCS_COMPONENT_ID,
     ) -> None:
-        self.url = url
-        self.system_id = system_id
+        super().__init__(url, system_id)
         self.capture = capture
-        self.counters = LinkCounters()
-        self.last_valid_time: float | None = None
-        self.seen_system_ids: set[int] = set()
         self._now = 0.0
         self._conn = mavutil.mavlink_connection(
             url,
@@ -126,16 +150,10 @@ class Link:
                 # an unknown message id cannot be checked (no CRC extra): not valid MAVLink
                 self.counters.bad += 1
                 continue
-            source = message.get_srcSystem()
-            self.seen_system_ids.add(source)
             if self.capture is not None:
                 self.capture("rx", bytes(message.get_msgbuf()), message, now)
-            if source != self.system_id:
-                self.counters.foreign += 1
-                continue
-            self.counters.received += 1
-            self.last_valid_time = now
-            messages.append(message)
+            if self._admit(message, now):
+                messages.append(message)
         return messages
 
     def _receive_datagrams(self) -> list:
@@ -199,10 +217,6 @@ class Link:
             out.append(message)
         return out
 
-    def silent_for(self, now: float) -> float:
-        """Seconds (wall) since the last valid message; infinite before the first one."""
-        return float("inf") if self.last_valid_time is None else now - self.last_valid_time
-
     def close(self) -> None:
         """Close the socket (idempotent)."""
         try:
@@ -216,7 +230,7 @@ class Link:
             self.capture("tx", bytes(message.get_msgbuf()), message, self._now)
 
 
-class MemoryLink:
+class MemoryLink(_Liveness):
     """A UAV's link inside one process (the fast mode): the same interface as `Link` for the
     drivers and the core, no socket. What the driver sends is packed (the GCS's identity and a
     sequence number, as on the wire) and queued in `outbox` for the caller to carry (through
@@ -224,11 +238,7 @@ class MemoryLink:
     `Link.receive` does, only the valid messages of the expected system id."""
 
     def __init__(self, url: str, system_id: int) -> None:
-        self.url = url
-        self.system_id = system_id
-        self.counters = LinkCounters()
-        self.last_valid_time: float | None = None
-        self.seen_system_ids: set[int] = set()
+        super().__init__(url, system_id)
         self.mav = mavutil.mavlink.MAVLink(
             None, srcSystem=GCS_SYSTEM_ID, srcComponent=GCS_COMPONENT_ID
         )
@@ -242,21 +252,7 @@ class MemoryLink:
 
     def accept(self, messages: list, now: float) -> list:
         """The messages that arrived at `now`; returns the valid ones of this UAV."""
-        valid = []
-        for message in messages:
-            source = message.get_srcSystem()
-            self.seen_system_ids.add(source)
-            if source != self.system_id:
-                self.counters.foreign += 1
-                continue
-            self.counters.received += 1
-            self.last_valid_time = now
-            valid.append(message)
-        return valid
-
-    def silent_for(self, now: float) -> float:
-        """Seconds since the last valid message; infinite before the first one."""
-        return float("inf") if self.last_valid_time is None else now - self.last_valid_time
+        return [message for message in messages if self._admit(message, now)]
 
     def close(self) -> None:
         return None

@@ -1023,9 +1023,9 @@ class GroundStation:
                 uav = driver.uav_id
                 if uav in record.acks or uav in record.refused:
                     continue
-                result = driver.speed_results.get(seq, -1)
-                if result == -1:
-                    continue
+                if seq not in driver.speed_results:
+                    continue  # still in flight
+                result = driver.speed_results[seq]
                 if result == mavlink.MAV_RESULT_ACCEPTED and seq in driver.speed_acks:
                     reaction = (driver.speed_acks[seq] - record.broadcast_wall) * speedup
                     self.speeds.acknowledge(record, uav, reaction)

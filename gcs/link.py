@@ -21,6 +21,7 @@ from dataclasses import dataclass
 os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 
 from fleetwire.frames import newest_telemetry  # noqa: E402
 
@@ -239,9 +240,8 @@ class MemoryLink(_Liveness):
 
     def __init__(self, url: str, system_id: int) -> None:
         super().__init__(url, system_id)
-        self.mav = mavutil.mavlink.MAVLink(
-            None, srcSystem=GCS_SYSTEM_ID, srcComponent=GCS_COMPONENT_ID
-        )
+        # MAVLink 2 whatever dialect mavutil picked when it was first imported
+        self.mav = mavlink2.MAVLink(None, srcSystem=GCS_SYSTEM_ID, srcComponent=GCS_COMPONENT_ID)
         self.outbox: list = []
 
     def send(self, message, now: float) -> None:

@@ -1,4 +1,4 @@
-"""`gcs eval paper`, reduced to the small mission (one fixed speed, one leader): it flies in
+"""`gcs eval paper`, reduced to a short mission (tests/missions/core.yaml) (one fixed speed, one leader): it flies in
 the fast mode, writes the figures of the paper's figs. 8-16, a table next to the paper's
 values and the numbers; bad input is one line and exit status 2."""
 
@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+MISSIONS = Path(__file__).resolve().parent / "missions"  # core.yaml: a short flight
 FIGURES = [
     "fig08_min_uav_uav.png",
     "fig09_min_uav_obstacle.png",
@@ -25,7 +26,7 @@ FIGURES = [
 
 def test_a_reduced_paper_evaluation_writes_figures_table_and_numbers(gcs_main, tmp_path):
     out = tmp_path / "eval"
-    args = ["eval", "paper", "--mission", EXAMPLES / "small.yaml", "--speeds", "8",
+    args = ["eval", "paper", "--mission", MISSIONS / "core.yaml", "--speeds", "8",
             "--leaders", "2", "--out", out, "--json"]  # fmt: skip
     result = gcs_main(*args)
     assert result.returncode == 0, result.stderr

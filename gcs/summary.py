@@ -74,7 +74,12 @@ def run_json(result: RunResult, log_path: str, safety_margin: float) -> dict[str
             "max_gap_ms": _num(result.setpoint_max_gap_ms),
         },
         "stalls": [
-            {"t": _num(s.stood_at), "resumed_s": _num(s.resumed_at), "held_back_s": s.held_back_s}
+            {
+                "t": _num(s.stood_at),
+                "paused_s": _num(s.paused_at),
+                "resumed_s": _num(s.resumed_at),
+                "held_back_s": s.held_back_s,
+            }
             for s in result.stalls
         ],
         "telemetry_shed": result.telemetry_shed,

@@ -129,6 +129,23 @@ class SpeedProfile:
             np.append(self.speeds[keep], float(speed)),
         )
 
+    def with_pause(self, at_s: float, length_s: float) -> SpeedProfile:
+        """This profile with the formation stopped for `length_s` from `at_s` (>= 0): speed 0,
+        then the speed it had, every later stretch `length_s` later. The smoothed reference of
+        a pause as long as the smoothing window stands still at its middle and then
+        accelerates at speed / window (DESIGN 3.5): a standing start."""
+        if not (math.isfinite(at_s) and at_s >= 0 and math.isfinite(length_s) and length_s > 0):
+            raise ValueError(f"pause: need at >= 0 and length > 0, not {at_s}, {length_s}")
+        keep = self.times < at_s
+        later = self.times > at_s
+        resume = float(self.speed_at(at_s))
+        return SpeedProfile(
+            np.concatenate(
+                [self.times[keep], [at_s, at_s + length_s], self.times[later] + length_s]
+            ),
+            np.concatenate([self.speeds[keep], [0.0, resume], self.speeds[later]]),
+        )
+
     @property
     def final_speed(self) -> float:
         """Speed of the last stretch (0 means the formation stops for good)."""

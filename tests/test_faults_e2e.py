@@ -171,17 +171,17 @@ def test_a_frozen_ground_station_makes_the_uavs_hold_then_follow_again(attacked)
     run, timed = attacked["run"], timed_events(attacked["log"])
     texts = [text for _, text in timed]
     assert run["setpoints"]["max_gap_ms"] >= 0.9 * FREEZE_MISSION_S / FREEZE_SPEEDUP * 1000
-    stalls = [(t, text) for t, text in timed if text.startswith("GCS scheduler stalled")]
-    lengths = [
-        (t, float(text.split("(")[1].split()[0]), float(text.split("held back ")[1].split()[0]))
-        for t, text in stalls
-        if "held back" in text
+    assert any(text.startswith("GCS scheduler stalled") for text in texts)
+    stalls = [
+        {**s, "length": s["held_back_s"] + s["resumed_s"] - s["t"]}  # mission s not flown
+        for s in run["stalls"]
     ]
-    ((paused_at, length, held_back),) = [s for s in lengths if s[1] >= 2.5]
+    (stall,) = [s for s in stalls if s["length"] >= 2.5]
+    began, paused_at, length = stall["t"], stall["paused_s"], stall["length"]
     # the vehicles flew 1 s along their last setpoints, braked and held: the rest of the stall
-    # is taken off the mission clock
-    assert 0.5 <= held_back <= length - 1.0
-    began = paused_at - (length - held_back)
+    # is taken off the mission clock (the clock never runs backwards)
+    assert began <= paused_at <= stall["resumed_s"]
+    assert 0.5 <= length - (paused_at - began) <= length - 1.0 + 0.1
     # the UAVs following a stream of setpoints when it froze (one just up holds anyway)
     since = {text.split(":")[0]: t for t, text in timed if "taking_off -> following" in text}
     streaming = {uav for uav, t in since.items() if t < began - 0.5}
@@ -197,7 +197,7 @@ def test_a_frozen_ground_station_makes_the_uavs_hold_then_follow_again(attacked)
     after = [
         max(e for e in m["tracking_error_m"] if e is not None)
         for _, m in recording.messages("/metrics")
-        if began - 1.0 <= m["t"] <= paused_at + 5.0
+        if began - 1.0 <= m["t"] <= stall["resumed_s"] + 5.0
     ]
     assert len(after) > 30 and max(after) < 4.5, max(after)
 

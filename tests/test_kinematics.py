@@ -552,3 +552,26 @@ def test_straight_path_has_no_speed_limit():
     assert recommended_window(0.0, 5.0) == 0.0
     with pytest.raises(ValueError):
         safe_speed(np.array(ELL, float), 0.0, 1.0)
+
+
+def test_a_pause_one_window_long_gives_a_standing_start():
+    """`with_pause(p, w)`: the formation stands still for w from p, then goes on at the speed
+    it had, every later change w later; the smoothed reference stands at V(p) with zero
+    velocity at p + w/2, then accelerates at speed / w (the restart after a ground-station
+    stall)."""
+    formation = aligned_formation([[0.0, 0.0], [400.0, 0.0]])
+    profile = SpeedProfile.from_changes(8.0, [(20.0, 5.0)])
+    window = 1.2
+    paused = profile.with_pause(10.0, window)
+    assert paused.times.tolist() == [0.0, 10.0, 10.0 + window, 20.0 + window]
+    assert paused.speeds.tolist() == [8.0, 0.0, 8.0, 5.0]
+    assert paused.distance(25.0 + window) == pytest.approx(profile.distance(25.0))
+    middle = 10.0 + window / 2
+    reference = smoothed_reference(formation, paused, [middle, middle + 0.3], window)
+    virtual = formation.positions(profile.distance(10.0))
+    np.testing.assert_allclose(reference.positions[0], virtual, atol=1e-9)
+    np.testing.assert_allclose(reference.velocities[0], 0.0, atol=1e-9)
+    moving = np.hypot(*reference.accelerations[1].T) > 0  # the UAVs already under way
+    np.testing.assert_allclose(np.hypot(*reference.accelerations[1][moving].T), 8.0 / window)
+    with pytest.raises(ValueError):
+        profile.with_pause(-1.0, window)

@@ -133,12 +133,15 @@ class UavTrack:
 @dataclass(frozen=True)
 class Stall:
     """A stall of the loop: from `since` to `until` (the loop's time) nothing ran; the mission
-    clock stood at `stood_at` and resumed from `resumed_at` (never earlier), `held_back_s`
-    mission seconds behind where it would have been."""
+    clock stood at `stood_at` (the last tick); the UAVs stood where the formation was at
+    `paused_at` (never earlier); the clock resumed from `resumed_at` (half a smoothing window
+    later when a standing start was inserted), `held_back_s` mission seconds behind where it
+    would have been (negative: ahead, the inserted pause being longer than the stall)."""
 
     since: float
     until: float
     stood_at: float
+    paused_at: float
     resumed_at: float
     held_back_s: float
 
@@ -542,44 +545,58 @@ class GroundStation:
         t_last = self.clock.mission_time(last)  # frozen there
         t_now = self.clock.raw_mission_time(now)
         paused_at = self._where_the_formation_stands(t_last, t_now)
-        held_back = t_now - paused_at
-        self.clock.resume(now, paused_at)
-        self._last_awake = now
+        resumed_at = paused_at
         text = (
             f"GCS scheduler stalled {now - last:.2f} s ({t_now - t_last:.1f} s of mission "
             "time): no setpoints meanwhile, the vehicles flew on their own failsafe; "
         )
-        if held_back > 1e-3:
+        moving = paused_at >= 0 and float(self.profile.speed_at(paused_at)) > 0
+        if t_now - paused_at > 1e-3 and moving and self._following():
+            # A standing start: the UAVs stopped near V(paused_at); a pause of one smoothing
+            # window there makes the reference stand still at its middle, then accelerate at
+            # speed / window, instead of asking them for full speed at once (DESIGN 3.5).
+            self.profile = self.profile.with_pause(paused_at, self.window_s)
+            resumed_at = paused_at + self.window_s / 2
+        held_back = t_now - resumed_at  # negative: the inserted pause is longer than the stall
+        self.clock.resume(now, resumed_at)
+        self._last_awake = now
+        if abs(held_back) > 1e-3:
             for clock in self._vehicle_clocks:
-                clock.pause(paused_at, held_back)
+                clock.pause(resumed_at, held_back)
+            stood = t_now - paused_at  # samples taken while the UAVs stood map to the pause
             self._samples = [
-                (uav, paused(t, paused_at, held_back), xyz, truth)
+                (uav, paused(t, paused_at, stood), xyz, truth)
                 for uav, t, xyz, truth in self._samples
             ]
             for track in self.tracks:
                 if track.last_sample_time is not None:
-                    track.last_sample_time = paused(track.last_sample_time, paused_at, held_back)
+                    track.last_sample_time = paused(track.last_sample_time, paused_at, stood)
             for driver in self.drivers:
                 driver.on_mission_clock_changed(now)
             text += (
-                f"mission clock held back {held_back:.2f} s, the formation resumes where the "
-                "UAVs stand"
+                f"mission clock held back {held_back:.2f} s: the formation resumes where the "
+                f"UAVs stand (t={paused_at:.2f} s)"
+                + (", from a standstill" if resumed_at > paused_at else "")
             )
         else:
             text += "they kept up with the formation"
-        self.stalls.append(Stall(last, now, t_last, paused_at, held_back))
+        self.stalls.append(Stall(last, now, t_last, paused_at, resumed_at, held_back))
         self._event(MonitorEvent(paused_at, "warning", "stall", text), now)
+
+    def _following(self) -> list[int]:
+        """The UAVs following the formation, with a known position."""
+        return [
+            i
+            for i, driver in enumerate(self.drivers)
+            if driver.phase == Phase.FOLLOWING and self.tracks[i].last_position is not None
+        ]
 
     def _where_the_formation_stands(self, t_from: float, t_to: float) -> float:
         """The mission time in [t_from, t_to] whose virtual targets are nearest to the following
         UAVs' latest positions (the least worst distance: the tracking error the monitor bounds);
         `t_from` if none is following (neither the formation nor the take-offs went on
         meanwhile), `t_to` if the formation did not move (frozen: nothing to hold back)."""
-        following = [
-            i
-            for i, driver in enumerate(self.drivers)
-            if driver.phase == Phase.FOLLOWING and self.tracks[i].last_position is not None
-        ]
+        following = self._following()
         count = int(np.clip(math.ceil((t_to - t_from) / 0.02) + 1, 2, 5001))
         times = np.linspace(t_from, t_to, count)
         distances = self.profile.distance(times)

@@ -33,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     mission = subparsers.add_parser(
         "mission",
         help="check, plan and fly a mission file",
-        description="Check, plan and fly a mission file (YAML, see CONTRACTS.md).",
+        description="Check, plan and fly a mission file (YAML, see docs/mission-file.md).",
     )
     commands = mission.add_subparsers(dest="mission_command", metavar="COMMAND", required=True)
 

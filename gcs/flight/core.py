@@ -355,15 +355,6 @@ class GroundStation:
         """Ctrl-C (from a signal handler: only counts; the next tick acts on it)."""
         self.interrupts += 1
 
-    def request_speed(
-        self, speed: float, source: str, now: float, at: float | None = None
-    ) -> SpeedChange:
-        """A speed change from the operator or the runtime; raises `SpeedRefused`."""
-        t = self.clock.mission_time(now) if self.clock.anchored else 0.0
-        change = self.speeds.request(speed, t, source, at)
-        self._apply(change, now)
-        return change
-
     def land_everyone(self, reason: str, now: float) -> None:
         """Abort: every UAV lands where it is; the run ends with exit status 1."""
         if self.aborting:

@@ -24,6 +24,7 @@ from rich.table import Table
 
 from gcs.errors import InputError
 from gcs.flight.clock import MissionClock
+from gcs.flight.records import MetricsRecord, SetpointRecord, UavStateRecord
 from gcs.link import mavutil
 from gcs.logs.recording import FlightRecorder
 from gcs.mission import load_mission
@@ -80,6 +81,22 @@ def _messages(uav: int) -> dict[str, list]:
     return {"rx": every_tick, "rx_1hz": every_second, "tx": sent, "tx_1hz": sent_second}
 
 
+def _state(uav: int) -> UavStateRecord:
+    """A following UAV's /uav<n>/state record, as the core writes one per position sample."""
+    return UavStateRecord(t=0.0, uav=uav, phase="following", position=[1.0, 2.0, 30.0],
+                          true_position=[1.0, 2.0, 30.0], armed=True, mode=4, landed_state=2,
+                          velocity=[8.0, 3.0, 0.0], virtual_target=[1.0, 2.0],
+                          tracking_error_m=0.4)  # fmt: skip
+
+
+def _setpoint(uav: int) -> SetpointRecord:
+    """A setpoint record as the core writes one per UAV and tick."""
+    return SetpointRecord(t=0.0, uav=uav, position=[1.0, 2.0, 30.0], velocity=[8.0, 3.0, 0.0],
+                          acceleration=[0.0, 0.0, 0.0], virtual_target=[1.0, 2.0],
+                          formation_speed=10.0, distance=100.0, latitude=45.764,
+                          longitude=4.8357, altitude=200.0, relative_altitude=30.0)  # fmt: skip
+
+
 def _plan(size: int, folder: Path):
     """The Table II mission with `size` UAVs, planned."""
     text = MISSION.read_text().replace("size: 9 ", f"size: {size} ")
@@ -100,18 +117,12 @@ def record_fleet(size: int, seconds: float, folder: Path) -> dict:
     rng = np.random.default_rng(1)
     positions = np.column_stack([rng.uniform(0, 2000, (size, 2)), np.full(size, 30.0)])
     targets = positions[:, :2].copy()
-    state = {"t": 0.0, "uav": 1, "phase": "following", "position": [1.0, 2.0, 30.0],
-             "true_position": [1.0, 2.0, 30.0], "velocity": [8.0, 3.0, 0.0],
-             "virtual_target": [1.0, 2.0], "tracking_error_m": 0.4, "armed": True, "mode": 4,
-             "landed_state": 2}  # fmt: skip
-    setpoint = {"t": 0.0, "uav": 1, "position": [1.0, 2.0, 30.0], "velocity": [8.0, 3.0, 0.0],
-                "acceleration": [0.0, 0.0, 0.0], "virtual_target": [1.0, 2.0],
-                "formation_speed": 10.0, "distance": 100.0, "latitude": 45.764,
-                "longitude": 4.8357, "altitude": 200.0, "relative_altitude": 30.0}  # fmt: skip
-    metrics = {"t": 0.0, "formation_speed": 10.0, "distance": 100.0, "min_uav_uav_m": 14.1,
-               "min_uav_obstacle_m": 20.0, "max_tracking_error_m": 0.5,
-               "tracking_error_m": [0.4] * size, "connected": True,
-               "positions": positions[:, :2].tolist()}  # fmt: skip
+    states = [_state(uav) for uav in range(1, size + 1)]
+    setpoints = [_setpoint(uav) for uav in range(1, size + 1)]
+    metrics = MetricsRecord(t=0.0, formation_speed=10.0, distance=100.0, min_uav_uav_m=14.1,
+                            min_uav_obstacle_m=20.0, max_tracking_error_m=0.5,
+                            tracking_error_m=[0.4] * size, connected=True,
+                            positions=positions.tolist())  # fmt: skip
     ticks = int(seconds * RATE_HZ)
     before = recorder.messages
     cpu = time.process_time()
@@ -124,10 +135,10 @@ def record_fleet(size: int, seconds: float, folder: Path) -> dict:
             for raw, message in kinds["rx"]:
                 recorder.mavlink(uav, "rx", raw, message, now)
             recorder.fix(uav, 45.764, 4.8357, 200.0, now)
-            recorder.state(uav, state, now)
+            recorder.state(states[uav - 1], now)
             for raw, message in kinds["tx"]:
                 recorder.mavlink(uav, "tx", raw, message, now)
-            recorder.setpoint(uav, setpoint, now)
+            recorder.setpoint(setpoints[uav - 1], now)
             if second:
                 for raw, message in kinds["rx_1hz"]:
                     recorder.mavlink(uav, "rx", raw, message, now)
@@ -160,16 +171,13 @@ def per_kind(folder: Path, count: int = 20_000) -> list[tuple[str, float]]:
     raw, message = kinds["rx"][0]
     sent, sent_message = kinds["tx"][0]
     positions = np.column_stack([np.linspace(0, 900, 9), np.zeros(9), np.full(9, 30.0)])
-    payload = {"t": 0.0, "uav": 1, "phase": "following", "position": [1.0, 2.0, 30.0],
-               "tracking_error_m": 0.4}  # fmt: skip
-    setpoint = {"t": 0.0, "uav": 1, "position": [1.0, 2.0, 30.0], "latitude": 45.764,
-                "longitude": 4.8357, "altitude": 200.0}  # fmt: skip
+    state, setpoint = _state(1), _setpoint(1)
     cases = [
         ("MAVLink received (GLOBAL_POSITION_INT)", lambda: recorder.mavlink(1, "rx", raw, message, wall.now)),
         ("MAVLink sent (SET_POSITION_TARGET_GLOBAL_INT)", lambda: recorder.mavlink(1, "tx", sent, sent_message, wall.now)),
         ("foxglove.LocationFix (/uav1/fix)", lambda: recorder.fix(1, 45.764, 4.8357, 200.0, wall.now)),
-        ("JSON state (/uav1/state)", lambda: recorder.state(1, payload, wall.now)),
-        ("setpoint JSON + target LocationFix (2 messages)", lambda: recorder.setpoint(1, setpoint, wall.now)),
+        ("JSON state (/uav1/state)", lambda: recorder.state(state, wall.now)),
+        ("setpoint JSON + target LocationFix (2 messages)", lambda: recorder.setpoint(setpoint, wall.now)),
         ("fleet tick, 9 UAVs: /tf + /scene + /fleet (3 messages)", lambda: recorder.fleet(1.0, positions, positions[:, :2], wall.now)),
     ]  # fmt: skip
     out = []

@@ -53,7 +53,7 @@ class SpeedChange:
 
 
 @dataclass
-class SpeedRecord:
+class SpeedBroadcast:
     """A change as broadcast, and each UAV's receipt."""
 
     change: SpeedChange
@@ -103,7 +103,7 @@ class SpeedChanges:
         self.window_s = window_s
         self.min_lead_s = min_lead_s
         self.announce_s = announce_s
-        self.records: list[SpeedRecord] = []
+        self.records: list[SpeedBroadcast] = []
         self.worst_reaction_s = 0.0
         self._scheduled = sorted((c for c in schedule if c.leader is None), key=lambda c: c.at)
         self._next_seq = 1
@@ -150,12 +150,12 @@ class SpeedChanges:
         self._last_effective = change.effective_s
         return change
 
-    def record(self, change: SpeedChange, broadcast_wall: float) -> SpeedRecord:
-        record = SpeedRecord(change, broadcast_wall)
+    def record(self, change: SpeedChange, broadcast_wall: float) -> SpeedBroadcast:
+        record = SpeedBroadcast(change, broadcast_wall)
         self.records.append(record)
         return record
 
-    def acknowledge(self, record: SpeedRecord, uav: int, reaction_s: float) -> None:
+    def acknowledge(self, record: SpeedBroadcast, uav: int, reaction_s: float) -> None:
         record.acks[uav] = reaction_s
         self.worst_reaction_s = max(self.worst_reaction_s, reaction_s)
 

@@ -25,6 +25,7 @@ from hypothesis import strategies as st
 import gcs.cli
 import vehicles.cli
 from gcs.flight.clock import MissionClock
+from gcs.flight.records import MetricsRecord
 from gcs.link import Link
 from gcs.logs.logreader import read_recording
 from gcs.logs.recording import FlightRecorder
@@ -316,7 +317,8 @@ def recording(tmp_path_factory) -> Path:
         wall[0] = 100.0 + 0.01 * k
         message = mav.heartbeat_encode(2, 3, 0, k, 4)
         recorder.mavlink(1, "rx", bytes(message.pack(mav)), message, wall[0])
-        recorder.metrics({"t": 0.01 * k, "formation_speed": 5.0}, wall[0])
+        metrics = MetricsRecord(0.01 * k, 5.0, 0.0, None, None, None, [], None, [])
+        recorder.metrics(metrics, wall[0])
         if k % 50 == 0:
             recorder.flush(wall[0])
     recorder.close()

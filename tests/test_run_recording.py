@@ -20,8 +20,16 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 from gcs.flight.clock import MissionClock
+from gcs.flight.records import (
+    MetricsRecord,
+    RadioRecord,
+    SetpointRecord,
+    SpeedRecord,
+    SpeedRecordKind,
+    UavStateRecord,
+)
 from gcs.link import mavutil
-from gcs.logs.recording import FlightRecorder
+from gcs.logs.recording import SCHEMAS, FlightRecorder
 
 mavlink = mavutil.mavlink
 
@@ -41,6 +49,21 @@ class JsonDecoderFactory(McapDecoderFactory):
 
     def decoder_for(self, message_encoding, schema):
         return json.loads if message_encoding == "json" else None
+
+
+def _metrics(t: float, **figures) -> MetricsRecord:
+    """A /metrics record at `t` with nothing measured yet except `figures`."""
+    empty = dict(
+        formation_speed=5.0,
+        distance=0.0,
+        min_uav_uav_m=None,
+        min_uav_obstacle_m=None,
+        max_tracking_error_m=None,
+        tracking_error_m=[],
+        connected=None,
+        positions=[],
+    )
+    return MetricsRecord(t=t, **{**empty, **figures})
 
 
 def read(path: Path):
@@ -67,12 +90,16 @@ def test_topics_schemas_and_the_shared_time_base(tmp_path: Path):
     recorder.mavlink(1, "tx", raw, heartbeat, 99.0)  # before the clock is anchored: kept
     recorder.plan({"path": [[0, 0], [1, 1]], "fleet_size": 2}, 99.5)
     clock.anchor(100.0, -5.0)  # mission time -5 s now, at speedup 10
-    recorder.setpoint(2, {"t": 0.0, "uav": 2, "position": [1.0, 2.0, 30.0]}, 100.5)
-    recorder.state(2, {"t": 0.0, "uav": 2, "phase": "following"}, 100.5)
+    recorder.setpoint(
+        SetpointRecord(0.0, 2, [1.0, 2.0, 30.0], [0.0] * 3, [0.0] * 3, [1.0, 2.0], 5.0, 0.0,
+                       45.76, 4.83, 230.0, 30.0),
+        100.5,
+    )  # fmt: skip
+    recorder.state(UavStateRecord(0.0, 2, "following", None, None, True, 4, 2), 100.5)
     recorder.fix(2, 45.76, 4.83, 200.0, 100.6)
     recorder.event("warning", "UAV 2: something", 100.7)
-    recorder.speed({"t": 1.0, "kind": "request", "seq": 1}, 100.8)
-    recorder.metrics({"t": 1.0, "min_uav_uav_m": 14.1}, 100.9)
+    recorder.speed(SpeedRecord(1.0, SpeedRecordKind.REQUEST, 1, 2.0, 8.0, "operator"), 100.8)
+    recorder.metrics(_metrics(1.0, min_uav_uav_m=14.1), 100.9)
     text = mav.statustext_encode(4, b"Arm: Need Position Estimate")
     recorder.mavlink(2, "rx", text.pack(mav), text, 101.0)
     recorder.attach("mission.yaml", "application/yaml", b"version: 1\n")
@@ -86,6 +113,7 @@ def test_topics_schemas_and_the_shared_time_base(tmp_path: Path):
         "/mavlink/1/tx",
         "/plan",
         "/uav2/setpoint",
+        "/uav2/target",
         "/uav2/state",
         "/uav2/fix",
         "/events",
@@ -123,6 +151,26 @@ def test_topics_schemas_and_the_shared_time_base(tmp_path: Path):
     assert tx["t"] is None and tx["sysid"] == 255 and tx["fields"]["type"] == 6
     parsed = mav.parse_buffer(__import__("base64").b64decode(tx["raw"]))
     assert parsed[0].get_type() == "HEARTBEAT"
+
+
+@pytest.mark.parametrize(
+    ("record", "schema_key"),
+    [
+        (SetpointRecord, "setpoint"),
+        (UavStateRecord, "state"),
+        (SpeedRecord, "speed"),
+        (MetricsRecord, "metrics"),
+    ],
+)
+def test_the_core_records_and_the_topic_schemas_name_the_same_fields(record, schema_key):
+    schema = SCHEMAS[schema_key]
+    assert set(record._FIELDS) == set(schema["properties"])
+    assert set(schema.get("required", [])) <= record.ALWAYS
+
+
+def test_speed_record_kinds_are_the_schema_kinds():
+    kinds = SCHEMAS["speed"]["properties"]["kind"]["enum"]
+    assert sorted(kind.value for kind in SpeedRecordKind) == sorted(kinds)
 
 
 def test_an_existing_file_is_refused_unless_forced(tmp_path: Path):
@@ -313,6 +361,7 @@ def test_a_killed_writer_leaves_a_file_readable_up_to_the_last_second(tmp_path: 
 import sys, time
 from gcs.logs.recording import FlightRecorder
 from gcs.flight.clock import MissionClock
+from gcs.flight.records import MetricsRecord
 clock = MissionClock()
 clock.anchor(time.monotonic(), 0.0)
 recorder = FlightRecorder({str(path)!r}, clock)
@@ -321,7 +370,7 @@ last_said = 0.0
 while True:
     now = time.monotonic()
     t = clock.mission_time(now)
-    recorder.metrics({{"t": t}}, now)
+    recorder.metrics(MetricsRecord(t, 5.0, 0.0, None, None, None, [], None, []), now)
     if t - last_said >= 0.2:
         last_said = t
         print(t, flush=True)
@@ -423,7 +472,7 @@ def test_the_recording_is_served_live_over_foxglove_websocket(tmp_path: Path):
         sock = foxglove_connect(recorder.server_port)
         opcode, payload = foxglove_receive(sock)
         assert json.loads(payload)["op"] == "serverInfo"
-        recorder.metrics({"t": 0.0}, wall.now)
+        recorder.metrics(_metrics(0.0), wall.now)
         channels = foxglove_channels(sock, {"/events", "/metrics"}, time.monotonic() + 10)
         assert channels["/events"]["schemaName"] == "foxglove.Log"
         assert channels["/metrics"]["schemaName"] == "fleetline.Metrics"
@@ -502,10 +551,10 @@ def test_radio_counters_reach_the_report(tmp_path: Path, planned):
     slots = plan.formation.start_slots
     for k in range(5):
         t = 0.1 * k
-        recorder.metrics({"t": t, "positions": slots.tolist()}, wall.now + t)
+        recorder.metrics(_metrics(t, positions=slots.tolist()), wall.now + t)
         packets = {"sent": 10 * k, "received": 9 * k, "dropped": k}
         users = {"sent": 4 * k, "received": 3 * k, "dropped": k}
-        recorder.radio({"t": t, "packets": packets, "ground_users": users}, wall.now + t)
+        recorder.radio(RadioRecord(t, {"packets": packets, "ground_users": users}), wall.now + t)
     recorder.close()
     report = write_report(read_recording(path), tmp_path / "report")
     assert report.summary["radio"]["packets"] == {"sent": 40, "received": 36, "dropped": 4}

@@ -49,15 +49,23 @@ import numpy as np
 
 from gcs.drivers.base import Driver, DriverEvent, Phase
 from gcs.flight.clock import MissionClock, VehicleClock, paused
+from gcs.flight.records import (
+    MetricsRecord,
+    RadioRecord,
+    SetpointRecord,
+    SpeedRecord,
+    SpeedRecordKind,
+    UavStateRecord,
+)
 from gcs.geodesy import enu_to_geodetic
 from gcs.link import mavutil
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
 from gcs.sim.radio import run_json_radio
 from gcs.speed import (
     ScheduledChange,
+    SpeedBroadcast,
     SpeedChange,
     SpeedChanges,
-    SpeedRecord,
     SpeedRefused,
 )
 from planner.kinematics import (
@@ -202,17 +210,18 @@ class _NoView:
 
 
 class Recorder(Protocol):
-    """What the runtime records (gcs.logs.recording.FlightRecorder implements it)."""
+    """What the core records, as typed records (`gcs.flight.records`); `wall` is the loop's
+    time of the thing recorded (gcs.logs.recording.FlightRecorder implements it)."""
 
-    def setpoint(self, uav: int, payload: dict, wall: float) -> None: ...
+    def setpoint(self, record: SetpointRecord, wall: float) -> None: ...
 
-    def state(self, uav: int, payload: dict, wall: float) -> None: ...
+    def state(self, record: UavStateRecord, wall: float) -> None: ...
 
     def fix(self, uav: int, lat: float, lon: float, alt: float, wall: float) -> None: ...
 
-    def speed(self, payload: dict, wall: float) -> None: ...
+    def speed(self, record: SpeedRecord, wall: float) -> None: ...
 
-    def metrics(self, payload: dict, wall: float) -> None: ...
+    def metrics(self, record: MetricsRecord, wall: float) -> None: ...
 
     def fleet(
         self, t: float, positions: np.ndarray, targets: np.ndarray | None, wall: float
@@ -220,7 +229,7 @@ class Recorder(Protocol):
 
     def event(self, level: str, message: str, wall: float, name: str = "gcs") -> None: ...
 
-    def radio(self, payload: dict, wall: float) -> None: ...
+    def radio(self, record: RadioRecord, wall: float) -> None: ...
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,19 +249,19 @@ class _Evaluation:
 class NullRecorder:
     """Records nothing (the fast mode keeps its own time series)."""
 
-    def setpoint(self, uav: int, payload: dict, wall: float) -> None:
+    def setpoint(self, record: SetpointRecord, wall: float) -> None:
         return None
 
-    def state(self, uav: int, payload: dict, wall: float) -> None:
+    def state(self, record: UavStateRecord, wall: float) -> None:
         return None
 
-    def speed(self, payload: dict, wall: float) -> None:
+    def speed(self, record: SpeedRecord, wall: float) -> None:
         return None
 
-    def metrics(self, payload: dict, wall: float) -> None:
+    def metrics(self, record: MetricsRecord, wall: float) -> None:
         return None
 
-    def radio(self, payload: dict, wall: float) -> None:
+    def radio(self, record: RadioRecord, wall: float) -> None:
         return None
 
     def fix(self, uav: int, lat: float, lon: float, alt: float, wall: float) -> None:
@@ -301,7 +310,7 @@ class GroundStation:
         self.speeds = SpeedChanges(
             max_speed=plan.speeds.max, window_s=self.window_s, schedule=schedule
         )
-        self._records: list[SpeedRecord] = []
+        self._records: list[SpeedBroadcast] = []
         stations = [mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations]
         self.safety = SafetyMonitor(
             fleet_size=size,
@@ -446,7 +455,7 @@ class GroundStation:
         for report in radio_reports:
             self.radio_report = report
             if self.clock.anchored:
-                self.recorder.radio({**report, "t": self.clock.mission_time(now)}, now)
+                self.recorder.radio(RadioRecord(self.clock.mission_time(now), report), now)
         for problem in problems:
             t = self.clock.mission_time(now) if self.clock.anchored else 0.0
             if not self.clock.anchored or not problem.uavs:
@@ -683,15 +692,17 @@ class GroundStation:
         for driver in self.drivers:
             if driver.phase not in (Phase.CONNECTING, Phase.FAILED):
                 driver.send_speed_change(change, now)
-        payload = {
-            "t": change.requested_s,
-            "kind": "request",
-            "seq": change.seq,
-            "effective_s": change.effective_s,
-            "speed": change.speed,
-            "source": change.source,
-        }
-        self.recorder.speed(payload, now)
+        self.recorder.speed(
+            SpeedRecord(
+                t=change.requested_s,
+                kind=SpeedRecordKind.REQUEST,
+                seq=change.seq,
+                effective_s=change.effective_s,
+                speed=change.speed,
+                source=change.source,
+            ),
+            now,
+        )
         text = (
             f"speed change {change.seq}: {change.speed:g} m/s at t={change.effective_s:.2f} s "
             f"({change.source})"
@@ -816,21 +827,20 @@ class GroundStation:
             driver.send_setpoint(positions[k], velocities[k], accelerations[k], t, now, geo[k])
             lat, lon, alt = geo[k]
             self.recorder.setpoint(
-                driver.uav_id,
-                {
-                    "t": t,
-                    "uav": driver.uav_id,
-                    "position": positions[k],
-                    "velocity": velocities[k],
-                    "acceleration": accelerations[k],
-                    "virtual_target": virtuals[k],
-                    "formation_speed": speed,
-                    "distance": distance,
-                    "latitude": lat,
-                    "longitude": lon,
-                    "altitude": alt,
-                    "relative_altitude": alt - driver.home_altitude_amsl,
-                },
+                SetpointRecord(
+                    t=t,
+                    uav=driver.uav_id,
+                    position=positions[k],
+                    velocity=velocities[k],
+                    acceleration=accelerations[k],
+                    virtual_target=virtuals[k],
+                    formation_speed=speed,
+                    distance=distance,
+                    latitude=lat,
+                    longitude=lon,
+                    altitude=alt,
+                    relative_altitude=alt - driver.home_altitude_amsl,
+                ),
                 now,
             )
 
@@ -859,17 +869,16 @@ class GroundStation:
             self._samples.append((index, t, position.copy(), truth))
         else:
             self.recorder.state(
-                driver.uav_id,
-                {
-                    "t": None,
-                    "uav": driver.uav_id,
-                    "phase": driver.phase.value,
-                    "position": _list(tel.position_enu),
-                    "true_position": _list(tel.true_position_enu),
-                    "armed": tel.armed,
-                    "mode": tel.custom_mode,
-                    "landed_state": int(tel.landed_state),
-                },
+                UavStateRecord(
+                    t=None,
+                    uav=driver.uav_id,
+                    phase=driver.phase.value,
+                    position=_list(tel.position_enu),
+                    true_position=_list(tel.true_position_enu),
+                    armed=tel.armed,
+                    mode=tel.custom_mode,
+                    landed_state=int(tel.landed_state),
+                ),
                 now,
             )
 
@@ -897,20 +906,19 @@ class GroundStation:
                 # the other one is the latest of its kind
                 sample = sampled[k].tolist()
                 self.recorder.state(
-                    driver.uav_id,
-                    {
-                        "t": float(times[k]),
-                        "uav": driver.uav_id,
-                        "phase": driver.phase.value,
-                        "position": _list(tel.position_enu) if truths[k] else sample,
-                        "true_position": sample if truths[k] else _list(tel.true_position_enu),
-                        "velocity": _list(tel.velocity_enu),
-                        "virtual_target": virtual[k].tolist(),
-                        "tracking_error_m": float(errors[k]),
-                        "armed": tel.armed,
-                        "mode": tel.custom_mode,
-                        "landed_state": int(tel.landed_state),
-                    },
+                    UavStateRecord(
+                        t=float(times[k]),
+                        uav=driver.uav_id,
+                        phase=driver.phase.value,
+                        position=_list(tel.position_enu) if truths[k] else sample,
+                        true_position=sample if truths[k] else _list(tel.true_position_enu),
+                        armed=tel.armed,
+                        mode=tel.custom_mode,
+                        landed_state=int(tel.landed_state),
+                        velocity=_list(tel.velocity_enu),
+                        virtual_target=virtual[k].tolist(),
+                        tracking_error_m=float(errors[k]),
+                    ),
                     now,
                 )
         # The fleet now: each UAV's last sample moved on by its velocity (samples are up to a
@@ -943,20 +951,20 @@ class GroundStation:
             self._last_metrics = t
             stats = self.safety.stats
             self.recorder.metrics(
-                {
-                    "t": t,
-                    "formation_speed": float(self.profile.speed_at(t)),
-                    "distance": float(self.profile.distance(t)),
-                    "min_uav_uav_m": _finite(stats.min_uav_uav_m),
-                    "min_uav_obstacle_m": _finite(stats.min_uav_obstacle_m),
-                    "max_tracking_error_m": _finite(
+                MetricsRecord(
+                    t=t,
+                    formation_speed=float(self.profile.speed_at(t)),
+                    distance=float(self.profile.distance(t)),
+                    min_uav_uav_m=_finite(stats.min_uav_uav_m),
+                    min_uav_obstacle_m=_finite(stats.min_uav_obstacle_m),
+                    max_tracking_error_m=_finite(
                         float(np.max(stats.max_tracking_error_m, initial=0.0))
                     ),
-                    "tracking_error_m": [_finite(e) for e in self.tracking_now.tolist()],
-                    "connected": stats.last_connected,
+                    tracking_error_m=[_finite(e) for e in self.tracking_now.tolist()],
+                    connected=stats.last_connected,
                     # the sample the monitors checked: `gcs log report` re-checks it
-                    "positions": [None if math.isnan(p[0]) else p for p in positions.tolist()],
-                },
+                    positions=[None if math.isnan(p[0]) else p for p in positions.tolist()],
+                ),
                 now,
             )
 
@@ -1034,22 +1042,25 @@ class GroundStation:
                 if seq not in driver.speed_results:
                     continue  # still in flight
                 result = driver.speed_results[seq]
+                reaction = None
                 if result == mavlink.MAV_RESULT_ACCEPTED and seq in driver.speed_acks:
                     reaction = (driver.speed_acks[seq] - record.broadcast_wall) * speedup
                     self.speeds.acknowledge(record, uav, reaction)
-                    kind = "ack"
+                    kind = SpeedRecordKind.ACK
+                elif result is None:
+                    record.refused[uav] = "no answer"
+                    kind = SpeedRecordKind.UNANSWERED
                 else:
-                    record.refused[uav] = "no answer" if result is None else str(result)
-                    reaction = None
-                    kind = "refused"
+                    record.refused[uav] = str(result)
+                    kind = SpeedRecordKind.REFUSED
                 self.recorder.speed(
-                    {
-                        "t": self.clock.mission_time(now),
-                        "kind": kind,
-                        "seq": seq,
-                        "uav": uav,
-                        **({"reaction_s": reaction} if reaction is not None else {}),
-                    },
+                    SpeedRecord(
+                        t=self.clock.mission_time(now),
+                        kind=kind,
+                        seq=seq,
+                        uav=uav,
+                        reaction_s=reaction,
+                    ),
                     now,
                 )
 

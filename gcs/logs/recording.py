@@ -54,6 +54,13 @@ import yaml
 from foxglove.channels import FrameTransformsChannel, GeoJsonChannel, LocationFixChannel, LogChannel
 from foxglove.messages import GeoJson, LocationFix, Log, LogLevel, SceneUpdate, Timestamp
 
+from gcs.flight.records import (
+    MetricsRecord,
+    RadioRecord,
+    SetpointRecord,
+    SpeedRecord,
+    UavStateRecord,
+)
 from gcs.logs import scene
 
 #: Recording profile written in the MCAP header.
@@ -373,28 +380,28 @@ class FlightRecorder:
     def plan(self, plan: dict, wall: float) -> None:
         self.write(self.channel("/plan", "plan"), plan, wall)
 
-    def setpoint(self, uav: int, payload: dict, wall: float) -> None:
-        """The setpoint streamed to UAV `uav`; with its geodetic position also a
-        `foxglove.LocationFix` on `/uav<n>/target` (the commanded track on the Map panel)."""
-        self.write(self.channel(f"/uav{uav}/setpoint", "setpoint"), payload, wall)
-        if "latitude" in payload and "longitude" in payload:
-            self._location(
-                f"/uav{uav}/target",
-                f"uav{uav}/target",
-                payload["latitude"],
-                payload["longitude"],
-                payload.get("altitude", 0.0),
-                wall,
-            )
+    def setpoint(self, record: SetpointRecord, wall: float) -> None:
+        """The setpoint streamed to one UAV on `/uav<n>/setpoint`, and its geodetic position
+        as a `foxglove.LocationFix` on `/uav<n>/target` (the commanded track on the Map panel)."""
+        uav = record.uav
+        self.write(self.channel(f"/uav{uav}/setpoint", "setpoint"), record.to_json(), wall)
+        self._location(
+            f"/uav{uav}/target",
+            f"uav{uav}/target",
+            record.latitude,
+            record.longitude,
+            record.altitude,
+            wall,
+        )
 
-    def state(self, uav: int, payload: dict, wall: float) -> None:
-        self.write(self.channel(f"/uav{uav}/state", "state"), payload, wall)
+    def state(self, record: UavStateRecord, wall: float) -> None:
+        self.write(self.channel(f"/uav{record.uav}/state", "state"), record.to_json(), wall)
 
-    def speed(self, payload: dict, wall: float) -> None:
-        self.write(self.channel("/speed", "speed"), payload, wall)
+    def speed(self, record: SpeedRecord, wall: float) -> None:
+        self.write(self.channel("/speed", "speed"), record.to_json(), wall)
 
-    def metrics(self, payload: dict, wall: float) -> None:
-        self.write(self.channel("/metrics", "metrics"), payload, wall)
+    def metrics(self, record: MetricsRecord, wall: float) -> None:
+        self.write(self.channel("/metrics", "metrics"), record.to_json(), wall)
 
     def fix(self, uav: int, latitude: float, longitude: float, altitude: float, wall: float):
         """A `foxglove.LocationFix` on `/uav<n>/fix` (Foxglove's Map panel)."""
@@ -540,11 +547,11 @@ class FlightRecorder:
             self._last_geojson = t
             self._write_geojson(wall)
 
-    def radio(self, payload: dict, wall: float) -> None:
+    def radio(self, record: RadioRecord, wall: float) -> None:
         """Radio-medium counters (`fleetline.RadioCounters`: cumulative `packets` sent,
         received and dropped, `ground_users` likewise, optional `delay_ms` and `per_uav`) on
         `/radio`: `gcs log report` draws the packets received at base stations from them."""
-        self.write(self.channel("/radio", "radio"), payload, wall)
+        self.write(self.channel("/radio", "radio"), record.to_json(), wall)
 
     def outcome(self, run_data: dict) -> None:
         """How the run ended: the run JSON as an attachment and `outcome` metadata."""

@@ -1,0 +1,157 @@
+"""What the ground-station core hands its recorder: typed, frozen records.
+
+The core (`gcs.flight.core.GroundStation`) decides what happened; a recorder decides how to
+keep it. Between them travel these value types, never loose dicts. Each record knows its own
+JSON form (`to_json`), the payload of its MCAP topic (docs/outputs.md, "MCAP topics"): the
+fields that are always written appear even when they are null, the optional ones are left out
+when they are None. The JSON schemas the recorder registers (`gcs.logs.recording.SCHEMAS`) list
+the same field names; a test keeps the two in step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from enum import StrEnum
+from typing import Any, ClassVar
+
+Vector = list[float]
+
+
+def _json(record: Any, always: frozenset[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for name in record._FIELDS:
+        value = getattr(record, name)
+        if value is None and name not in always:
+            continue
+        out[name] = value.value if isinstance(value, StrEnum) else value
+    return out
+
+
+class _Record:
+    """JSON form shared by the records: field order as declared, optional Nones left out."""
+
+    __slots__ = ()
+    _FIELDS: ClassVar[tuple[str, ...]] = ()
+    #: Fields written even when None (the schema's required ones and the always-present ones).
+    ALWAYS: ClassVar[frozenset[str]] = frozenset()
+
+    def to_json(self) -> dict[str, Any]:
+        return _json(self, self.ALWAYS)
+
+
+def _declare(cls):
+    """Freeze `cls` as a slotted dataclass and remember its field order for `to_json`."""
+    cls = dataclass(frozen=True, slots=True)(cls)
+    cls._FIELDS = tuple(f.name for f in fields(cls))
+    return cls
+
+
+@_declare
+class SetpointRecord(_Record):
+    """The setpoint streamed to one UAV at mission time `t` (topic `/uav<n>/setpoint`)."""
+
+    ALWAYS: ClassVar[frozenset[str]] = frozenset(
+        {"t", "uav", "position", "velocity", "acceleration", "virtual_target"}
+    )
+
+    t: float
+    uav: int
+    position: Vector  # local ENU, m
+    velocity: Vector  # m/s
+    acceleration: Vector  # m/s^2
+    virtual_target: Vector  # the UAV's virtual target V_n(t) (eq. 27), m
+    formation_speed: float
+    distance: float  # the formation's travelled distance along the path, m
+    latitude: float
+    longitude: float
+    altitude: float  # AMSL, m
+    relative_altitude: float  # above the UAV's home, m
+
+
+@_declare
+class UavStateRecord(_Record):
+    """One UAV's state (topic `/uav<n>/state`): a position sample the monitors checked, or,
+    before the mission clock is anchored, what the UAV reported while connecting (`t` None)."""
+
+    ALWAYS: ClassVar[frozenset[str]] = frozenset(
+        {"t", "uav", "phase", "position", "true_position", "armed", "mode", "landed_state"}
+    )
+
+    t: float | None
+    uav: int
+    phase: str
+    position: Vector | None  # as the UAV reports it (with its navigation noise)
+    true_position: Vector | None  # the simulator's truth (SIM_STATE), when there is one
+    armed: bool
+    mode: int | None  # the autopilot's custom mode
+    landed_state: int  # MAV_LANDED_STATE
+    velocity: Vector | None = None
+    virtual_target: Vector | None = None
+    tracking_error_m: float | None = None
+
+
+class SpeedRecordKind(StrEnum):
+    """What a `/speed` record says about a speed change."""
+
+    REQUEST = "request"  # the ground station broadcast it
+    ACK = "ack"  # a UAV acknowledged it (and showed it in its telemetry)
+    REFUSED = "refused"  # a UAV answered with a refusal
+    UNANSWERED = "unanswered"  # a UAV never answered
+
+
+@_declare
+class SpeedRecord(_Record):
+    """A speed change broadcast, or one UAV's answer to it (topic `/speed`)."""
+
+    ALWAYS: ClassVar[frozenset[str]] = frozenset({"t", "kind", "seq"})
+
+    t: float
+    kind: SpeedRecordKind
+    seq: int
+    effective_s: float | None = None  # request: the mission time every UAV applies it
+    speed: float | None = None  # request: m/s
+    source: str | None = None  # request: schedule, operator, leader
+    uav: int | None = None  # answers: which UAV
+    reaction_s: float | None = None  # ack: mission seconds from broadcast to acknowledgement
+
+
+@_declare
+class MetricsRecord(_Record):
+    """The monitors' figures at mission time `t` (topic `/metrics`)."""
+
+    ALWAYS: ClassVar[frozenset[str]] = frozenset(
+        {
+            "t",
+            "formation_speed",
+            "distance",
+            "min_uav_uav_m",
+            "min_uav_obstacle_m",
+            "max_tracking_error_m",
+            "tracking_error_m",
+            "connected",
+            "positions",
+        }
+    )
+
+    t: float
+    formation_speed: float
+    distance: float
+    min_uav_uav_m: float | None  # smallest so far (None before any sample)
+    min_uav_obstacle_m: float | None
+    max_tracking_error_m: float | None
+    tracking_error_m: list[float | None]  # per UAV, now
+    connected: bool | None  # is every UAV chained to a base station now
+    positions: list[Vector | None]  # the fleet the monitors checked (x, y, z; None: unknown)
+
+
+@_declare
+class RadioRecord(_Record):
+    """The radio medium's counters at mission time `t` (topic `/radio`); `counters` is the
+    medium's report as it sent it (packets, ground users, delays, per UAV)."""
+
+    t: float
+    counters: Mapping[str, Any]
+
+    def to_json(self) -> dict[str, Any]:
+        return {**self.counters, "t": self.t}

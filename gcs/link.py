@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import logging
 import os
+import re
+import socket
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -37,6 +40,11 @@ MAX_MESSAGES_PER_RECEIVE = 10_000
 BACKLOG_DATAGRAMS = 64
 #: ... the newest this many of each streamed message.
 STALE_KEEP = 2
+#: A `tcp:` endpoint that refuses (an autopilot still starting) is tried this many times, this
+#: far apart, before the refusal is the answer. pymavlink's own retries print to stdout, which
+#: `--json` keeps for JSON alone, so they are off.
+CONNECT_ATTEMPTS = 3
+CONNECT_RETRY_S = 1.0
 
 #: Called for every message in or out: (direction "rx" | "tx", raw bytes, message, wall time).
 Capture = Callable[[str, bytes, object, float], None]
@@ -107,11 +115,7 @@ class Link(_Liveness):
         super().__init__(url, system_id)
         self.capture = capture
         self._now = 0.0
-        self._conn = mavutil.mavlink_connection(
-            url,
-            source_system=source_system,
-            source_component=source_component,
-        )
+        self._conn = open_connection(url, source_system, source_component)
         self._conn.mav.robust_parsing = True
         self._conn.mav.set_send_callback(self._on_sent)
 
@@ -256,3 +260,38 @@ class MemoryLink(_Liveness):
 
     def close(self) -> None:
         return None
+
+
+_NETWORK_URL = re.compile(r"^(udpout|udpin|udpbcast|udp|tcpin|tcp):(.+):(\d+)$")
+
+
+def open_connection(url: str, source_system: int, source_component: int = 0):
+    """pymavlink's connection for the connection string `url`, or `OSError` with the reason.
+
+    Network strings are checked first (port range, host name: pymavlink finds those late or
+    never); a refused `tcp:` connection (an autopilot still starting) is retried quietly
+    (`CONNECT_ATTEMPTS`), then raised as `ConnectionRefusedError`."""
+    network = _NETWORK_URL.match(url)
+    if network:
+        host, port = network.group(2), int(network.group(3))
+        if not 0 < port < 65536:
+            raise OSError(f"port {port} is not in 1..65535")
+        try:
+            socket.getaddrinfo(host, port)
+        except OSError as error:
+            raise OSError(f"host {host}: {error}") from None
+    for attempt in range(1, CONNECT_ATTEMPTS + 1):
+        try:
+            return mavutil.mavlink_connection(
+                url, source_system=source_system, source_component=source_component, retries=0
+            )
+        except ConnectionRefusedError as error:
+            if attempt == CONNECT_ATTEMPTS:
+                raise
+            log.warning("%s: %s; trying again in %g s", url, error, CONNECT_RETRY_S)
+            time.sleep(CONNECT_RETRY_S)
+        except OSError:
+            raise
+        except Exception as error:  # noqa: BLE001 - pymavlink raises ValueError, SerialException...
+            raise OSError(str(error)) from None
+    raise AssertionError("unreachable")

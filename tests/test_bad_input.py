@@ -185,6 +185,51 @@ def test_every_vehicles_flag_is_refused_on_one_line(capsys):
     assert len(cases) >= 30
 
 
+@pytest.mark.parametrize("log", ["/proc/fleetline.mcap", "/sys/fleetline.mcap"])
+def test_a_log_path_the_system_refuses_is_one_line(capsys, tmp_path, monkeypatch, log):
+    """A folder that exists but takes no file (virtual, read-only): the recorder cannot
+    create it, and nothing has started yet."""
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_gcs(capsys, ["mission", "run", str(MISSION), "--json", "--log", log])
+    one_line_exit_2(code, out, err, "--log")
+    assert log in err
+
+
+def test_no_log_folder_where_one_cannot_be_made_is_one_line(capsys, monkeypatch):
+    monkeypatch.chdir("/proc")  # logs/ cannot be created here
+    code, out, err = run_gcs(capsys, ["mission", "run", str(MISSION), "--json"])
+    one_line_exit_2(code, out, err, "--log")
+
+
+@pytest.mark.slow
+def test_a_connection_refused_at_start_is_one_line_naming_the_endpoint(capsys, tmp_path):
+    closed = socket.socket()  # a port nobody listens on
+    closed.bind(("127.0.0.1", 0))
+    port = closed.getsockname()[1]
+    closed.close()
+    urls = [f"tcp:127.0.0.1:{port}", *(f"udpout:127.0.0.1:{port + k}" for k in (1, 2, 3))]
+    log = str(tmp_path / "run.mcap")
+    args = ["mission", "run", str(MISSION), "--json", "--log", log, "--connect", *urls]
+    code, out, err = run_gcs(capsys, args)
+    assert code == 2 and out == "", err
+    refusal = err.splitlines()[-1]
+    assert refusal.startswith("--connect: ") and urls[0] in refusal and "refused" in refusal
+    assert "Traceback" not in err
+    assert all("gcs.link" in line for line in err.splitlines()[:-1] if "refused" in line)
+
+
+def test_an_unknown_host_in_the_mission_names_the_connection(capsys, tmp_path):
+    mission = mission_file(
+        tmp_path,
+        fleet={"connections": [f"udpout:nohost.invalid:{14550 + k}" for k in range(4)]},
+    )
+    log = str(tmp_path / "run.mcap")
+    code, out, err = run_gcs(capsys, ["mission", "run", str(mission), "--json", "--log", log])
+    assert code == 2 and out == "" and "Traceback" not in err, err
+    refusal = err.splitlines()[-1]
+    assert refusal.startswith(f"{mission}: fleet.connections[0]: ") and "nohost.invalid" in refusal
+
+
 # --------------------------------------------------------------------------- the key file
 def test_a_bad_key_file_is_refused_before_anything_flies(tmp_path, monkeypatch, capsys):
     mission = mission_file(tmp_path, signing={"key_file": "fleet.key"})

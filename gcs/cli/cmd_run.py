@@ -122,7 +122,12 @@ def resolve_log_path(args: argparse.Namespace, name: str) -> Path:
     """The log file to write; bad input (exit 2) if it exists without --force."""
     if args.log is None:
         path = default_log_path(name)
-        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InputError(
+                None, "--log", f"a log file path: {path.parent}/ cannot be created here ({exc})"
+            ) from None
     else:
         path = args.log
         if path.suffix.lower() != ".mcap":
@@ -212,6 +217,10 @@ def run_command(args: argparse.Namespace) -> int:
             recorder = FlightRecorder(log_path, clock, force=args.force, serve_port=args.foxglove)
         except LiveServerError as error:
             raise InputError(None, "--foxglove", f"a free TCP port ({error})") from None
+        except OSError as error:  # the folder exists but the system refuses the file
+            raise InputError(
+                None, "--log", f"a file we may create, got {log_path} ({error})"
+            ) from None
         stack.callback(recorder.close)
         if recorder.server_port is not None:
             Console(stderr=True, highlight=False).print(
@@ -243,7 +252,16 @@ def run_command(args: argparse.Namespace) -> int:
         drivers = []
         for index, url in enumerate(urls):
             uav = index + 1
-            link = Link(url, uav, capture=_capture(recorder, uav))
+            try:
+                link = Link(url, uav, capture=_capture(recorder, uav))
+            except OSError as error:  # a tcp: endpoint refusing, an address not ours...
+                if args.connect:
+                    where, key = None, "--connect"
+                else:
+                    where, key = mission.source, f"fleet.connections[{index}]"
+                raise InputError(
+                    where, key, f"a MAVLink endpoint that accepts a link, got {url} ({error})"
+                ) from None
             stack.callback(link.close)
             signing.apply(link, uav)
             spec = UavSpec(

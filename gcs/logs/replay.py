@@ -12,19 +12,17 @@ from __future__ import annotations
 import base64
 import logging
 import re
-import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from gcs.errors import InputError
-from gcs.link import GCS_SYSTEM_ID, mavutil
+from gcs.link import GCS_SYSTEM_ID, open_connection
 from gcs.logs.logreader import Recording
 
 log = logging.getLogger(__name__)
 
 _MAVLINK_TOPIC = re.compile(r"^/mavlink/(\d+)/(rx|tx)$")
-_NETWORK_URL = re.compile(r"^(udpout|udpin|udpbcast|udp|tcpin|tcp):(.+):(\d+)$")
 
 
 @dataclass(frozen=True)
@@ -83,21 +81,11 @@ def recorded_frames(
 
 
 def open_output(url: str):
-    """A pymavlink connection to send to (any mavutil connection string); bad one: exit 2.
-    Network ones are checked first (port range, host name), pymavlink checks them late."""
-    expected = "a MAVLink connection string such as udpout:127.0.0.1:14550"
-    network = _NETWORK_URL.match(url)
-    if network:
-        host, port = network.group(2), int(network.group(3))
-        if not 0 < port < 65536:
-            raise InputError(None, "--to", f"{expected} (port {port} is not in 1..65535)")
-        try:
-            socket.getaddrinfo(host, port)
-        except OSError as error:
-            raise InputError(None, "--to", f"{expected} (host {host}: {error})") from None
+    """A pymavlink connection to send to (any mavutil connection string); bad one: exit 2."""
     try:
-        return mavutil.mavlink_connection(url, source_system=GCS_SYSTEM_ID)
-    except Exception as error:  # noqa: BLE001 - pymavlink raises OSError, SerialException...
+        return open_connection(url, GCS_SYSTEM_ID)
+    except OSError as error:
+        expected = "a MAVLink connection string such as udpout:127.0.0.1:14550"
         raise InputError(None, "--to", f"{expected} ({url}: {error})") from None
 
 

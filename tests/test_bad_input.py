@@ -152,6 +152,10 @@ def test_every_gcs_command_refuses_bad_flags_on_one_line(capsys, tiny_log, tmp_p
         (["log", "replay", "{log}", "--to", "nonsense"], "--to"),
         (["log", "replay", "{log}", "--to", "udpout:127.0.0.1:9", "--uav", "0"], "UAV 0"),
         (["sitl", "launch-plan", "{file}", "--autopilot", "px4", "--speedup", "0"], "--speedup"),
+        (["log", "report", "{log}", "--out", "/proc/fleetline-report"], "/proc/fleetline-report"),
+        (["log", "report", "{log}", "--out", "/sys/fleetline-report"], "/sys/fleetline-report"),
+        (["eval", "paper", "--out", "/proc/fleetline-eval"], "/proc/fleetline-eval"),
+        (["mission", "plan", "{file}", "--out", "/proc/fleetline.json"], "/proc/fleetline.json"),
     ],
 )
 def test_bad_flag_values_are_refused_before_anything_starts(capsys, tiny_log, args, flag):

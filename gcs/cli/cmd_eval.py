@@ -15,6 +15,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from gcs.cli.outputs import output_folder
 from gcs.errors import InputError
 from gcs.mission import load_mission
 from gcs.sim.eval import DEFAULT_MISSION, EvalPlan, run_all, write_figures, write_results
@@ -65,8 +66,7 @@ def paper_command(args: argparse.Namespace) -> int:
     if not speeds and not leaders:
         raise InputError(None, "--speeds", "at least one speed or leader to fly")
     mission = load_mission(args.mission)  # bad file: exit 2 before anything flies
-    if args.out.exists() and not args.out.is_dir():
-        raise InputError(None, "--out", f"a directory, got the file {args.out}")
+    output_folder(args.out, "--out")
     plan = EvalPlan(mission=args.mission, speeds=speeds, leaders=leaders)
     console = Console(stderr=args.json, highlight=False)
     began = time.perf_counter()

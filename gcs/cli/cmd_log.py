@@ -16,6 +16,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
+from gcs.cli.outputs import output_folder
 from gcs.errors import InputError
 from gcs.logs.logreader import Recording, read_recording
 
@@ -170,9 +171,7 @@ def info_command(args: argparse.Namespace) -> int:
 def report_command(args: argparse.Namespace) -> int:
     from gcs.logs.report import write_report
 
-    out = args.out
-    if out.exists() and not out.is_dir():
-        raise InputError(None, "--out", f"a folder, got the file {out}")
+    out = output_folder(args.out, "--out")
     recording = read_recording(args.log, keep=lambda topic: not topic.startswith("/mavlink/"))
     report = write_report(recording, out)
     console = Console(highlight=False)

@@ -15,7 +15,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from gcs.errors import InputError
+from gcs.cli.outputs import output_path, write_output
 from gcs.mission import load_mission
 from gcs.planning import MissionPlan, plan_json, plan_mission
 
@@ -115,37 +115,18 @@ def plan_command(args: argparse.Namespace) -> int:
     text = json.dumps(data, allow_nan=False)
     written = []
     if out is not None:
-        _write(out, "--out", lambda: out.write_text(json.dumps(data, indent=2) + "\n"))
+        write_output(out, "--out", lambda: out.write_text(json.dumps(data, indent=2) + "\n"))
         written.append(out)
     if plot is not None:
         from gcs.plot import save_plan_figure  # matplotlib only when asked
 
-        _write(plot, "--plot", lambda: save_plan_figure(plan, plot))
+        write_output(plot, "--plot", lambda: save_plan_figure(plan, plot))
         written.append(plot)
     console = Console(stderr=args.json, highlight=False)
     if args.json:
         print(text)
     print_summary(console, plan, written)
     return EXIT_OK if plan.valid else EXIT_NO_PATH
-
-
-def output_path(path: Path, flag: str, suffixes: tuple[str, ...]) -> Path:
-    """Refuse, before planning, an output path that cannot be written."""
-    if path.suffix.lower() not in suffixes:
-        raise InputError(None, flag, f"a file name ending in {' or '.join(suffixes)}, got {path}")
-    if path.is_dir():
-        raise InputError(None, flag, f"a file path, got the directory {path}")
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(None, flag, f"a file in an existing directory, got {path}")
-    return path
-
-
-def _write(path: Path, flag: str, write: Any) -> None:
-    try:
-        write()
-    except OSError as exc:
-        raise InputError(None, flag, f"a writable file, got {path} ({exc.strerror})") from None
 
 
 def print_summary(console: Console, plan: MissionPlan, written: list[Path] | None = None) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import hashlib
 import json
 import os
 import signal
@@ -398,15 +399,18 @@ while True:
 
 
 # --------------------------------------------------------------------------- live (WebSocket)
-def foxglove_connect(port: int, timeout: float = 10.0) -> socket.socket:
-    """A WebSocket client of Foxglove's protocol (stdlib only): the upgrade handshake."""
+def foxglove_connect(
+    port: int, timeout: float = 10.0, subprotocol: str = "foxglove.sdk.v1"
+) -> socket.socket:
+    """A WebSocket client of Foxglove's protocol (stdlib only): the upgrade handshake, which
+    must name the subprotocol the client asked for."""
     sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
     key = base64.b64encode(os.urandom(16)).decode()
     sock.sendall(
         (
             f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
             f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
-            "Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n"
+            f"Sec-WebSocket-Protocol: {subprotocol}\r\n\r\n"
         ).encode()
     )
     head = b""
@@ -415,6 +419,11 @@ def foxglove_connect(port: int, timeout: float = 10.0) -> socket.socket:
         assert byte, "the server closed the connection during the handshake"
         head += byte
     assert head.startswith(b"HTTP/1.1 101"), head
+    accept = base64.b64encode(
+        hashlib.sha1((key + "258EAFA5-E914-47DA-95CA-C5AB0DC85B11").encode()).digest()
+    )
+    assert f"sec-websocket-protocol: {subprotocol}".encode() in head.lower()
+    assert b"sec-websocket-accept: " + accept.lower() in head.lower()
     return sock
 
 
@@ -464,12 +473,16 @@ def foxglove_channels(sock: socket.socket, wanted: set[str], deadline: float) ->
 
 
 @pytest.mark.slow
-def test_the_recording_is_served_live_over_foxglove_websocket(tmp_path: Path):
+@pytest.mark.parametrize(
+    "subprotocol",
+    ["foxglove.sdk.v1", "foxglove.websocket.v1"],  # today's Foxglove; Lichtblick, older apps
+)
+def test_the_recording_is_served_live_over_foxglove_websocket(tmp_path: Path, subprotocol):
     clock, wall = _anchored_clock()
     recorder = FlightRecorder(tmp_path / "live.mcap", clock, serve_port=0)
     try:
         recorder.event("info", "before the client", wall.now)
-        sock = foxglove_connect(recorder.server_port)
+        sock = foxglove_connect(recorder.server_port, subprotocol=subprotocol)
         opcode, payload = foxglove_receive(sock)
         assert json.loads(payload)["op"] == "serverInfo"
         recorder.metrics(_metrics(0.0), wall.now)

@@ -62,6 +62,7 @@ from gcs.flight.records import (
     UavStateRecord,
 )
 from gcs.logs import scene
+from gcs.logs.foxglove_front import FoxgloveFront
 
 #: Recording profile written in the MCAP header.
 PROFILE = "fleetline"
@@ -265,13 +266,9 @@ class FlightRecorder:
         # The sinks before any channel: anything logged on this context from now on is kept.
         # The server first: a port in use is refused before the file is created.
         self._server = None
+        self._front: FoxgloveFront | None = None
         if serve_port is not None:
-            try:
-                self._server = foxglove.start_server(
-                    context=self.context, host="127.0.0.1", port=serve_port, name="fleetline"
-                )
-            except RuntimeError as error:  # FoxgloveError: the port is taken
-                raise LiveServerError(f"127.0.0.1:{serve_port}: {error}") from None
+            self._server, self._front = _serve_live(self.context, serve_port)
         try:
             self._writer = foxglove.open_mcap(
                 self.path,
@@ -280,8 +277,7 @@ class FlightRecorder:
                 writer_options=foxglove.mcap.MCAPWriteOptions(profile=PROFILE),
             )
         except BaseException:
-            if self._server is not None:
-                self._server.stop()
+            self._stop_serving()
             raise
         self._json: dict[str, foxglove.Channel] = {}
         self._fixes: dict[str, LocationFixChannel] = {}
@@ -311,7 +307,7 @@ class FlightRecorder:
     @property
     def server_port(self) -> int | None:
         """TCP port of the live Foxglove server (None without one)."""
-        return None if self._server is None else self._server.port
+        return None if self._front is None else self._front.port
 
     # ------------------------------------------------------------------ generic
     def channel(self, topic: str, schema_key: str) -> foxglove.Channel:
@@ -593,9 +589,31 @@ class FlightRecorder:
         elif self._pending:
             self._drain_pending()
         self.closed = True
+        self._stop_serving()
+        self._writer.close()
+
+    def _stop_serving(self) -> None:
+        if self._front is not None:
+            self._front.close()
         if self._server is not None:
             self._server.stop()
-        self._writer.close()
+
+
+def _serve_live(context: foxglove.Context, port: int):
+    """foxglove-sdk's WebSocket server on a private loopback port behind a `FoxgloveFront` on
+    127.0.0.1:`port` (clients of both subprotocol names; see `gcs.logs.foxglove_front`). A
+    taken port is refused (`LiveServerError`) before anything else starts."""
+    try:
+        front = FoxgloveFront("127.0.0.1", port)
+    except OSError as error:
+        raise LiveServerError(f"127.0.0.1:{port}: {error.strerror or error}") from None
+    try:
+        server = foxglove.start_server(context=context, host="127.0.0.1", port=0, name="fleetline")
+    except BaseException:
+        front.close()
+        raise
+    front.start(server.port)
+    return server, front
 
 
 def mission_geojson_files(mission) -> dict[str, bytes]:

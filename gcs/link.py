@@ -142,6 +142,14 @@ class Link(_Liveness):
         except OSError as error:  # pragma: no cover - a vanished peer on a connected socket
             log.debug("send on %s failed: %s", self.url, error)
 
+    def write_raw(self, data: bytes) -> None:
+        """Send bytes as they are: a message another tool sent (`gcs.flight.forward`), neither
+        signed with the fleet's key nor counted as this station's."""
+        try:
+            self._conn.write(data)
+        except OSError as error:  # pragma: no cover - a vanished peer on a connected socket
+            log.debug("forward on %s failed: %s", self.url, error)
+
     def receive(self, now: float) -> list:
         """Drain what is waiting on the socket; return the valid messages of this UAV."""
         if isinstance(self._conn, mavutil.mavudp):

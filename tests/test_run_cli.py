@@ -39,6 +39,9 @@ def gcs_run(monkeypatch, capsys, tmp_path):
         (["--log", "run.txt"], "--log"),
         (["--log", "missing/dir/run.mcap"], "--log"),
         (["--foxglove", "70000"], "--foxglove"),
+        (["--out-readonly"], "--out-readonly"),
+        (["--out", "nonsense:x"], "--out"),
+        (["--out", "udpout:nohost.invalid:14550"], "nohost.invalid"),
     ],
 )
 def test_bad_flags_exit_2_with_one_line(gcs_run, args, names):

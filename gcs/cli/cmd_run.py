@@ -28,6 +28,7 @@ from gcs.drivers.sim import SimFleet, SimVehicleSetup
 from gcs.errors import InputError
 from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, RunOptions
+from gcs.flight.forward import Forwarder
 from gcs.flight.live import LiveLoop
 from gcs.link import Link
 from gcs.logs.recording import FlightRecorder, LiveServerError
@@ -78,6 +79,19 @@ def register(mission_commands: argparse._SubParsersAction) -> None:
         metavar="PORT",
         help="also serve the recording live to Foxglove on 127.0.0.1:PORT (default 8765; "
         "0 picks a free port, printed at start)",
+    )
+    run.add_argument(
+        "--out",
+        action="append",
+        metavar="URL",
+        help="also forward every UAV's MAVLink to this pymavlink connection string, as "
+        "MAVProxy's --out (QGroundControl: udpout:127.0.0.1:14550); what the tool sends goes "
+        "to the UAV it names, unsigned (repeatable)",
+    )
+    run.add_argument(
+        "--out-readonly",
+        action="store_true",
+        help="the --out tools watch only: nothing they send reaches a UAV",
     )
     run.add_argument(
         "--insecure",
@@ -144,6 +158,8 @@ def resolve_log_path(args: argparse.Namespace, name: str) -> Path:
 
 def check_arguments(args: argparse.Namespace) -> None:
     """Refuse bad flag values before anything starts (exit 2)."""
+    if args.out_readonly and not args.out:
+        raise InputError(None, "--out-readonly", "an --out URL to go with it")
     if not (math.isfinite(args.speedup) and 0 < args.speedup <= MAX_SPEEDUP):
         raise InputError(
             None, "--speedup", f"a number in (0, {MAX_SPEEDUP:g}], got {args.speedup:g}"
@@ -248,12 +264,21 @@ def run_command(args: argparse.Namespace) -> int:
 
         operator = OperatorSocket(socket_path_for(log_path))
         stack.callback(operator.close)
+        forwarder = None
+        if args.out:
+            try:
+                forwarder = Forwarder(args.out, readonly=args.out_readonly)
+            except OSError as error:
+                raise InputError(
+                    None, "--out", f"a MAVLink connection string we can open ({error})"
+                ) from None
+            stack.callback(forwarder.close)
         timing = DriverTiming(speedup=args.speedup)
         drivers = []
         for index, url in enumerate(urls):
             uav = index + 1
             try:
-                link = Link(url, uav, capture=_capture(recorder, uav))
+                link = Link(url, uav, capture=_capture(recorder, uav, forwarder))
             except OSError as error:  # a tcp: endpoint refusing, an address not ours...
                 if args.connect:
                     where, key = None, "--connect"
@@ -282,7 +307,7 @@ def run_command(args: argparse.Namespace) -> int:
             stack.callback(view.close)
             options = RunOptions(**{**options.__dict__, "interactive": view.interactive})
         run = GroundStation(plan, drivers, clock, recorder, options, view=view)
-        loop = LiveLoop(run, fleet=fleet, operator=operator)
+        loop = LiveLoop(run, fleet=fleet, operator=operator, forwarder=forwarder)
         previous = signal.getsignal(signal.SIGINT)
 
         def on_sigint(signum, frame):
@@ -335,8 +360,19 @@ def sim_setup(mission, formation, args, leaders, log_path: Path) -> SimVehicleSe
     )
 
 
-def _capture(recorder: FlightRecorder, uav: int):
-    def capture(direction: str, raw: bytes, message, wall: float) -> None:
-        recorder.mavlink(uav, direction, raw, message, wall)
+def _capture(recorder: FlightRecorder, uav: int, forwarder: Forwarder | None):
+    """Every message of UAV `uav`'s link into the log; what the UAV sent also to the --out
+    tools."""
+    if forwarder is None:
 
-    return capture
+        def capture(direction: str, raw: bytes, message, wall: float) -> None:
+            recorder.mavlink(uav, direction, raw, message, wall)
+
+        return capture
+
+    def capture_and_forward(direction: str, raw: bytes, message, wall: float) -> None:
+        recorder.mavlink(uav, direction, raw, message, wall)
+        if direction == "rx":
+            forwarder.from_uav(raw)
+
+    return capture_and_forward

@@ -14,6 +14,7 @@ from collections.abc import Callable
 
 from gcs.drivers.base import Fleet
 from gcs.flight.core import GroundStation, RunResult
+from gcs.flight.forward import Forwarder
 from gcs.speed import OperatorSocket
 
 #: Longest wait for messages while connecting (wall s).
@@ -31,11 +32,13 @@ class LiveLoop:
         *,
         fleet: Fleet | None = None,
         operator: OperatorSocket | None = None,
+        forwarder: Forwarder | None = None,
         monotonic: Callable[[], float] = time.monotonic,
     ) -> None:
         self.station = station
         self.fleet = fleet
         self.operator = operator
+        self.forwarder = forwarder
         self._monotonic = monotonic
         self._last_view = -float("inf")
         self.tick_work: list[float] = []  # wall seconds each flight tick took
@@ -69,6 +72,9 @@ class LiveLoop:
             selector = selectors.DefaultSelector()
         for index, driver in enumerate(drivers):
             selector.register(driver.link.fileno(), selectors.EVENT_READ, index)
+        if self.forwarder is not None:  # the outputs' tools: (None, output index)
+            for output, fd in enumerate(self.forwarder.filenos()):
+                selector.register(fd, selectors.EVENT_READ, (None, output))
         return selector
 
     def _connect(self, selector) -> bool:
@@ -107,10 +113,17 @@ class LiveLoop:
     def _receive(self, selector, timeout: float) -> None:
         ready = selector.select(timeout)
         drivers = self.station.drivers
+        tools = [key.data[1] for key, _ in ready if isinstance(key.data, tuple)]
+        if tools:
+            links = {driver.spec.system_id: driver.link for driver in drivers}
+            for output in tools:
+                self.forwarder.poll(output, links)
 
         def batches():
             for key, _ in ready:
                 index = key.data
+                if isinstance(index, tuple):
+                    continue
                 now = self._monotonic()
                 yield index, drivers[index].link.receive(now), now
 

@@ -135,6 +135,9 @@ class Vehicle:
     max_acceleration: float = 6.0
     radius: float = 0.5
     tracking_allowance: float = 0.0  # metres; resolved from the safety margin when absent
+    #: Set each autopilot's own limits (its parameters) to max_speed / max_acceleration for
+    #: the flight when they are lower, and put them back after landing.
+    apply_limits: bool = False
 
 
 @dataclass(frozen=True)
@@ -513,7 +516,7 @@ class _Parser:
         )
 
     def vehicle(self, value: Any, safety_margin: float) -> Vehicle:
-        keys = ("max_speed", "max_acceleration", "radius", "tracking_allowance")
+        keys = ("max_speed", "max_acceleration", "radius", "tracking_allowance", "apply_limits")
         m = self.mapping(value, "vehicle", keys)
         d = Vehicle()
         radius = self.positive(m.get("radius", d.radius), "vehicle.radius", "m")
@@ -538,6 +541,7 @@ class _Parser:
             ),
             radius=radius,
             tracking_allowance=allowance,
+            apply_limits=self.boolean(m.get("apply_limits", False), "vehicle.apply_limits"),
         )
 
     def speed(self, value: Any, vehicle: Vehicle) -> SpeedSchedule:

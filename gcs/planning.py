@@ -271,6 +271,30 @@ def plan_json(plan: MissionPlan) -> dict[str, Any]:
     return out
 
 
+def plan_within_limits(
+    plan: MissionPlan,
+    max_speed: float,
+    max_acceleration: float,
+    *,
+    connections: tuple[str, ...] | None = None,
+    method: str = "exact",
+) -> MissionPlan:
+    """`plan`'s mission planned again for vehicles that allow no more than `max_speed` and
+    `max_acceleration` (an autopilot's own limits): speeds capped to `max_speed`, then to the
+    safe formation speed these allow (as `--cap-speed`)."""
+    mission = plan.mission
+    vehicle = replace(
+        mission.vehicle,
+        max_speed=min(mission.vehicle.max_speed, max_speed),
+        max_acceleration=min(mission.vehicle.max_acceleration, max_acceleration),
+    )
+    speeds = mission.speed
+    if speeds.max > vehicle.max_speed:
+        speeds = _cap(speeds, vehicle.max_speed)
+    limited = replace(mission, vehicle=vehicle, speed=speeds)
+    return plan_mission(limited, cap_speed=True, connections=connections, method=method)
+
+
 def _profile(speeds: SpeedSchedule) -> SpeedProfile:
     return SpeedProfile.from_changes(speeds.initial, [(c.at, c.speed) for c in speeds.changes])
 

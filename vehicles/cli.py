@@ -430,6 +430,8 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         AutopilotConfig(),
         failsafe=failsafe,
         telemetry=telemetry,
+        # WPNAV_SPEED: ArduCopter's GUIDED controller is bounded by it, as ours by the airframe
+        waypoint_speed_mps=args.max_speed,
         boot_time_s=args.boot_time,
         disarm_delay_s=args.disarm_delay,
         takeoff_speed_mps=min(2.5, args.max_climb),

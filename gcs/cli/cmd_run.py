@@ -33,7 +33,7 @@ from gcs.flight.live import LiveLoop
 from gcs.link import Link
 from gcs.logs.recording import FlightRecorder, LiveServerError
 from gcs.mission import load_mission
-from gcs.planning import plan_json, plan_mission
+from gcs.planning import plan_json, plan_mission, plan_within_limits
 from gcs.signing import RunSigning
 from gcs.sim.radio import medium_setup
 from gcs.speed import OperatorSocket, socket_path_for
@@ -218,6 +218,13 @@ def run_command(args: argparse.Namespace) -> int:
         setpoint_rate_hz=rate,
         link_wait_s=args.link_wait,
         takeoff_lead_s=args.takeoff_lead,
+        autopilot_limits=(
+            "apply"
+            if mission.vehicle.apply_limits
+            else "cap"
+            if args.cap_speed or mission.speed.cap_to_safe
+            else "refuse"
+        ),
     )
     clock = MissionClock(args.speedup)
     formation = plan.formation
@@ -306,7 +313,17 @@ def run_command(args: argparse.Namespace) -> int:
             view = LiveView(Console(stderr=True))
             stack.callback(view.close)
             options = RunOptions(**{**options.__dict__, "interactive": view.interactive})
-        run = GroundStation(plan, drivers, clock, recorder, options, view=view)
+
+        def replan(max_speed: float, max_acceleration: float):
+            return plan_within_limits(
+                plan,
+                max_speed,
+                max_acceleration,
+                connections=tuple(args.connect) if args.connect else None,
+                method=args.method,
+            )
+
+        run = GroundStation(plan, drivers, clock, recorder, options, view=view, replan=replan)
         loop = LiveLoop(run, fleet=fleet, operator=operator, forwarder=forwarder)
         previous = signal.getsignal(signal.SIGINT)
 
@@ -327,6 +344,9 @@ def run_command(args: argparse.Namespace) -> int:
         data = run_json(result, str(log_path), mission.safety_margin)
         data["signing"] = signing.summary()
         recorder.outcome(data)
+        if result.limits_refused:  # before take-off: the mission, not the flight, was wrong
+            refused = result.limits_refused[0]
+            raise InputError(mission.source, refused.mission_key, refused.expected())
 
     if args.json:
         print(json.dumps(data, allow_nan=False))

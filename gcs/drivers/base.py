@@ -50,6 +50,12 @@ What it MAY override (defaults: a plain, well-behaved autopilot)
   `honours_speed_change_time`, `home_tolerance_m`.
 * `stream_rates_hz` (class attribute): the telemetry streams asked for (or turned off, rate 0)
   by `on_connected(now)`, which runs once, after the first heartbeat.
+* `limit_parameters` and `parameter_encoding` (class attributes): the parameters that bound
+  what the autopilot's position controller follows (`gcs.drivers.limits`), read once connected
+  (the ground station waits for them, or for the reads to be given up, before take-off),
+  and how the family encodes integer
+  parameters (`gcs.drivers.parameters`). `limits` gives them; `apply_limits` sets them for the
+  flight, and they are put back once the UAV has landed.
 * `position_ready()`: the position estimate allows arming (ArduPilot adds EKF, pre-arm bit).
 * `arm_allowed(now)`: an ARM may be sent now, the guided mode being shown (PX4: pre-arm bit).
 * `mode_request(mode)`: the command of a mode request (default `mode_command`; LAND:
@@ -106,6 +112,8 @@ from gcs.drivers.commands import (
     RetryPolicy,
     VehicleTexts,
 )
+from gcs.drivers.limits import ARDUCOPTER, AutopilotLimits, LimitParameters
+from gcs.drivers.parameters import Encoding, ParameterTable
 from gcs.geodesy import Origin, enu_to_geodetic, geodetic_point_to_enu
 from gcs.link import Link, mavutil
 from gcs.speed import SpeedChange
@@ -278,6 +286,9 @@ class Driver(ABC):
     stream_rates_hz: ClassVar[dict[int, float]] = {}
     #: Pacing of commands, refusals, confirmations (see `RetryPolicy`).
     retry_policy: ClassVar[RetryPolicy] = RetryPolicy()
+    #: The parameters bounding horizontal tracking (None: not read) and their encoding.
+    limit_parameters: ClassVar[LimitParameters | None] = ARDUCOPTER
+    parameter_encoding: ClassVar[Encoding] = Encoding.C_CAST
     #: Setpoints flowing without a gap for this long (vehicle time) make a stream...
     stream_established_s: ClassVar[float] = 0.5
     #: ... and a gap longer than this (vehicle time) starts a new one.
@@ -318,6 +329,9 @@ class Driver(ABC):
         self._last_setpoint: float | None = None
         #: Mission time at a wall time, once the runtime anchored its clock (None before).
         self.mission_clock: Callable[[float], float | None] = lambda now: None
+        pacing = Backoff(self.timing.wall(1.0, floor=0.25), 1.5, self.timing.wall(3.0, floor=1))
+        self.parameters = ParameterTable(self.parameter_encoding, retry=pacing)
+        self._limits_before: dict[str, tuple[float, int]] = {}  # set for the flight: originals
 
     # ------------------------------------------------------------------ family hooks
     @abstractmethod
@@ -353,7 +367,10 @@ class Driver(ABC):
 
     def on_connected(self, now: float) -> None:
         """Called once, after the first heartbeat: asks for the family's `stream_rates_hz`
-        (MAV_CMD_SET_MESSAGE_INTERVAL; rate 0 turns a stream off)."""
+        (MAV_CMD_SET_MESSAGE_INTERVAL; rate 0 turns a stream off) and reads its
+        `limit_parameters`."""
+        if self.limit_parameters is not None:
+            self.parameters.read(*self.limit_parameters.names)
         for message_id, rate in self.stream_rates_hz.items():
             entry = mavlink.mavlink_map.get(message_id)
             name = entry.msgname if entry is not None else str(message_id)
@@ -372,6 +389,66 @@ class Driver(ABC):
         if outcome.refused:
             text = f"stream {what}: {outcome.describe()}"
             self.emit("command", text, now, mavlink.MAV_SEVERITY_WARNING)
+
+    @property
+    def limits(self) -> AutopilotLimits | None:
+        """What the autopilot allows, once its limit parameters were read (None: not read,
+        or the autopilot never answered for one of them)."""
+        p = self.limit_parameters
+        if p is None:
+            return None
+        speed, acceleration = (
+            self.parameters.value(p.speed.name),
+            self.parameters.value(p.acceleration.name),
+        )
+        if speed is None or acceleration is None:
+            return None
+        return AutopilotLimits(self.uav_id, p, speed, acceleration)
+
+    def apply_limits(self, max_speed: float, max_acceleration: float, now: float) -> None:
+        """Raise the autopilot's limits to `max_speed` / `max_acceleration` (SI) for the flight
+        (PARAM_SET, confirmed by PARAM_VALUE); they are put back once the UAV has landed."""
+        p = self.limit_parameters
+        if p is None:
+            return
+        for parameter, value in ((p.speed, max_speed), (p.acceleration, max_acceleration)):
+            before = self.parameters.value(parameter.name)
+            param_type = self.parameters.param_type(parameter.name)
+            if before is None or param_type is None or parameter.si(before) >= value:
+                continue
+            self._limits_before.setdefault(parameter.name, (before, param_type))
+            self.parameters.set(parameter.name, parameter.from_si(value), param_type)
+            self.emit(
+                "parameter",
+                f"{parameter.name} {before:g} -> {parameter.from_si(value):g} {parameter.unit} "
+                "for the flight",
+                now,
+            )
+        self._send_parameter_requests(now)
+
+    @property
+    def parameters_settled(self) -> bool:
+        """No parameter read or set is still waiting for the vehicle's answer."""
+        return self.parameters.settled()
+
+    def _restore_limits(self, now: float) -> None:
+        for name, (value, param_type) in self._limits_before.items():
+            self.parameters.set(name, value, param_type)
+            self.emit("parameter", f"{name} put back to {value:g}", now)
+        self._limits_before = {}
+
+    def _send_parameter_requests(self, now: float) -> None:
+        target = self.spec.system_id
+        for request in self.parameters.due(now):
+            name = request[1].encode()
+            if request[0] == "read":
+                message = self.link.mav.param_request_read_encode(target, 1, name, -1)
+            else:
+                message = self.link.mav.param_set_encode(target, 1, name, request[2], request[3])
+            self.link.send(message, now)
+
+    def _on_param_value(self, msg, now: float) -> None:
+        self.parameters.on_param_value(msg)
 
     def position_ready(self) -> bool:
         """True when the autopilot's position estimate allows arming."""
@@ -523,6 +600,8 @@ class Driver(ABC):
         for severity, text in self.texts.flush(now, self.timing.wall(0.5, floor=0.5)):
             self._on_vehicle_text(severity, text, now)
         self.commands.step(now)
+        if not self.parameters.settled():
+            self._send_parameter_requests(now)
         getattr(self, f"_step_{self.phase.value}")(now)
         self._pursue_mode_goal(now)
 
@@ -773,6 +852,8 @@ class Driver(ABC):
         self.phase_since = now
         if phase in (Phase.LANDED, Phase.FAILED):
             self._mode_goal = None
+        if phase == Phase.LANDED and self._limits_before:
+            self._restore_limits(now)
         text = f"{previous.value} -> {phase.value}" + (f" ({why})" if why else "")
         self.emit("phase", text, now, severity)
 
@@ -1100,6 +1181,7 @@ _HANDLERS: dict[str, str] = {
     "COMMAND_ACK": "_on_command_ack",
     "COMMAND_INT": "_on_command",
     "COMMAND_LONG": "_on_command",
+    "PARAM_VALUE": "_on_param_value",
 }
 
 

@@ -34,6 +34,8 @@ from typing import ClassVar
 
 from fleetwire.modes import PX4_MODE, PX4_MODE_PARTS, px4_custom_mode
 from gcs.drivers.base import CommandSpec, Driver, FlightMode, Phase, RetryPolicy, mavlink
+from gcs.drivers.limits import PX4 as PX4_LIMITS
+from gcs.drivers.parameters import Encoding
 
 #: HEARTBEAT custom_mode of the PX4 modes the driver meets (pymavlink's `px4_map`).
 OFFBOARD, AUTO_LOITER, AUTO_LAND, AUTO_RTL, AUTO_TAKEOFF, POSCTL = (
@@ -61,6 +63,10 @@ class PX4Driver(Driver):
     #: The heartbeat comes every 1.018 s (P1) and shows a new mode at the next one; the
     #: refusal texts follow the refusing ACK within the same millisecond (P1 7.76, P2 29.92).
     retry_policy = RetryPolicy(confirm_s=2.5, reason_before_s=0.1, reason_after_s=0.3)
+    #: Offboard tracking is bounded by MPC_XY_VEL_MAX and MPC_ACC_HOR_MAX; PX4 copies integer
+    #: parameters bytewise into PARAM_VALUE's float (P1: CAL_BARO0_ID arrives as 9.3e-39).
+    limit_parameters = PX4_LIMITS
+    parameter_encoding = Encoding.BYTEWISE
     #: Without the pre-arm bit, ARM anyway after this long in OFFBOARD to learn why not.
     arm_without_prearm_after_s: ClassVar[float] = 5.0
 

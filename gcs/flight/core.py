@@ -41,13 +41,14 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
 from gcs.drivers.base import Driver, DriverEvent, Phase
+from gcs.drivers.limits import LimitExceeded, exceeded
 from gcs.flight.clock import MissionClock, VehicleClock, paused
 from gcs.flight.records import (
     MetricsRecord,
@@ -122,6 +123,10 @@ class RunOptions:
     connect_timeout_s: float = 60.0  # wall: every UAV ready within this
     finish_timeout_s: float = 120.0  # mission time for the landings after an abort
     metrics_period_s: float = 0.0  # mission time between /metrics records (0: every tick)
+    #: A mission assuming more than an autopilot's limits (`gcs.drivers.limits`): "refuse"
+    #: before take-off, "cap" (re-plan with the autopilot's limits: `replan`), or "apply"
+    #: (set the autopilots' limits for the flight, put back after landing).
+    autopilot_limits: str = "refuse"
 
 
 @dataclass
@@ -186,6 +191,8 @@ class RunResult:
     radio: dict | None = None  # the radio medium's run JSON `radio` object, if one ran
     stalls: list[Stall] = field(default_factory=list)  # stalls of the loop, held back or not
     telemetry_shed: int = 0  # stale telemetry datagrams of backlogs, not decoded
+    #: The mission assumed more than an autopilot allows and was refused before take-off.
+    limits_refused: list[LimitExceeded] = field(default_factory=list)
 
 
 class View(Protocol):
@@ -286,11 +293,15 @@ class GroundStation:
         options: RunOptions,
         *,
         view: View | None = None,
+        replan: Callable[[float, float], object] | None = None,
     ) -> None:
-        mission = plan.mission
-        self.plan = plan
-        self.mission = mission
-        self.formation = plan.formation
+        """`replan(max_speed, max_acceleration)`: the mission planned again with these vehicle
+        limits (RunOptions.autopilot_limits "cap")."""
+        self._replan = replan
+        self.limits_refused: list[LimitExceeded] = []
+        self._limits_checked = False
+        self._limits_applied = False
+        self._adopt(plan)
         self.drivers = drivers
         self.clock = clock
         self.recorder = recorder
@@ -300,26 +311,6 @@ class GroundStation:
         self.size = size
         self.tracks = [UavTrack() for _ in range(size)]
         self._vehicle_clocks = [VehicleClock() for _ in range(size)]
-        self.altitude = mission.altitude
-        a_max = mission.vehicle.max_acceleration
-        self.window_s = float(recommended_window(plan.speeds.max, a_max, self.formation))
-        # The profile starts with the initial speed; every change (scheduled ones included) is
-        # added when it is broadcast, always ahead of its effective time.
-        self.profile = SpeedProfile.constant(plan.speeds.initial)
-        schedule = [ScheduledChange(c.at, c.speed, c.leader) for c in plan.speeds.changes]
-        self.speeds = SpeedChanges(
-            max_speed=plan.speeds.max, window_s=self.window_s, schedule=schedule
-        )
-        self._records: list[SpeedBroadcast] = []
-        stations = [mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations]
-        self.safety = SafetyMonitor(
-            fleet_size=size,
-            obstacles=mission.obstacles,
-            base_stations=np.array(stations),
-            radio_range=mission.radio_range,
-            safety_margin=mission.safety_margin,
-            vehicle_radius=mission.vehicle.radius,
-        )
         self.links = LinkMonitor(size, options.link_timeout_s)
         self.events: list[MonitorEvent] = []
         self.fatal = False
@@ -340,9 +331,37 @@ class GroundStation:
         self.radio_report: dict | None = None  # the radio medium's last report
         self._last_awake: float | None = None  # the last tick (or the end of a stall)
         self.stalls: list[Stall] = []
-        self.current_speed = plan.speeds.initial
         self.tracking_now = np.full(size, np.nan)
         self.mission_time = None
+
+    def _adopt(self, plan) -> None:
+        """Fly `plan`: everything derived from it (at construction, or re-planned before
+        take-off with the autopilots' limits)."""
+        mission = plan.mission
+        self.plan = plan
+        self.mission = mission
+        self.formation = plan.formation
+        self.altitude = mission.altitude
+        a_max = mission.vehicle.max_acceleration
+        self.window_s = float(recommended_window(plan.speeds.max, a_max, self.formation))
+        # The profile starts with the initial speed; every change (scheduled ones included) is
+        # added when it is broadcast, always ahead of its effective time.
+        self.profile = SpeedProfile.constant(plan.speeds.initial)
+        schedule = [ScheduledChange(c.at, c.speed, c.leader) for c in plan.speeds.changes]
+        self.speeds = SpeedChanges(
+            max_speed=plan.speeds.max, window_s=self.window_s, schedule=schedule
+        )
+        self._records: list[SpeedBroadcast] = []
+        stations = [mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations]
+        self.safety = SafetyMonitor(
+            fleet_size=plan.formation.fleet_size,
+            obstacles=mission.obstacles,
+            base_stations=np.array(stations),
+            radio_range=mission.radio_range,
+            safety_margin=mission.safety_margin,
+            vehicle_radius=mission.vehicle.radius,
+        )
+        self.current_speed = plan.speeds.initial
 
     # ------------------------------------------------------------------ public
     @property
@@ -406,6 +425,10 @@ class GroundStation:
                 self.fatal = True
                 return False
             return None
+        if not self._limits_checked:
+            verdict = self._autopilot_limits(now)
+            if verdict is not True:
+                return verdict
         self.clock.anchor(now, -self.takeoff_lead_s())
         self._last_awake = now
         bound, budget = self.smoothing_bound(), self.mission.error_budget
@@ -423,6 +446,54 @@ class GroundStation:
             driver.set_mission_clock(self.clock.mission_time)
             driver.step(now)
         return True
+
+    def _autopilot_limits(self, now: float) -> bool | None:
+        """The mission against what every autopilot allows (`gcs.drivers.limits`), once all
+        are READY: True to go on, None to wait (limits being set), False refused (`reason`).
+        `options.autopilot_limits` says what a mission assuming more gets: refused, re-planned
+        with the lowest limits ("cap"), or the autopilots' limits set for the flight
+        ("apply"; a UAV puts its own back once landed)."""
+        if not all(d.parameters_settled for d in self.drivers):
+            return None  # "apply": the vehicles have not shown the new values yet
+        vehicle = self.mission.vehicle
+        if not self._limits_applied:  # (once)
+            for driver in self.drivers:
+                for name in driver.parameters.failed():
+                    text = (
+                        f"UAV {driver.uav_id}: {name} unread: the autopilot never answered, "
+                        "its limits are not checked"
+                    )
+                    self._event(MonitorEvent(0.0, "warning", "limits_unread", text), now)
+        limits = [lim for lim in (d.limits for d in self.drivers) if lim is not None]
+        beyond = [
+            e for lim in limits for e in exceeded(lim, vehicle.max_speed, vehicle.max_acceleration)
+        ]
+        policy = self.options.autopilot_limits
+        if beyond and policy == "apply" and not self._limits_applied:
+            self._limits_applied = True
+            for driver in self.drivers:
+                driver.apply_limits(vehicle.max_speed, vehicle.max_acceleration, now)
+            return None
+        if beyond and policy == "cap" and self._replan is not None:
+            speed = min(lim.max_speed for lim in limits)
+            acceleration = min(lim.max_acceleration for lim in limits)
+            plan = self._replan(speed, acceleration)
+            if plan.valid and plan.formation.fleet_size == self.size:
+                self._adopt(plan)
+                text = (
+                    f"re-planned within the autopilots' limits: {plan.speeds.max:g} m/s, "
+                    f"{plan.mission.vehicle.max_acceleration:g} m/s^2 ({beyond[0].text()})"
+                )
+                self._event(MonitorEvent(0.0, "warning", "limits_capped", text), now)
+                beyond = []
+        self._limits_checked = True
+        if not beyond:
+            return True
+        self.limits_refused = beyond
+        hint = "raise it on the autopilot, lower the mission's value, or fly with --cap-speed"
+        self.reason = f"{beyond[0].text()}: {hint} or vehicle.apply_limits: true"
+        self._event(MonitorEvent(0.0, "error", "limits", self.reason), now)
+        return False
 
     def receive(self, now: float, batches: Iterable[tuple[int, list, float]]) -> None:
         """The loop woke up at `now` and hands over what arrived: (UAV index, valid messages,
@@ -1193,6 +1264,7 @@ class GroundStation:
             radio=run_json_radio(self.radio_report),
             stalls=list(self.stalls),
             telemetry_shed=sum(getattr(d.link.counters, "stale", 0) for d in self.drivers),
+            limits_refused=list(self.limits_refused),
         )
 
 

@@ -45,6 +45,7 @@ from tests.fakes.common import (
     UNSUPPORTED,
     FakeAutopilot,
     Home,
+    ParameterSet,
     command_ack,
     enu_to_global,
     global_position_int,
@@ -121,8 +122,27 @@ class ArduCopterParams:
     land_disarm: float = 2.1  # touchdown -> auto-disarm in LAND (A1: 105.5 -> 107.6)
 
 
+#: ArduCopter's parameters as a ground station reads them: the count and encoding recorded in
+#: A1 (1349 parameters, integers cast to float: COMPASS_DEV_ID 97539.0 INT32); the limits of
+#: its GUIDED position controller at the firmware's defaults (not read in the transcripts).
+ARDUCOPTER_PARAMETERS = ParameterSet(
+    count=1349,
+    bytewise=False,
+    values={
+        "WPNAV_SPEED": (1000.0, mavlink.MAV_PARAM_TYPE_REAL32),  # cm/s
+        "WPNAV_ACCEL": (250.0, mavlink.MAV_PARAM_TYPE_REAL32),  # cm/s^2
+        "WPNAV_SPEED_UP": (250.0, mavlink.MAV_PARAM_TYPE_REAL32),
+        "WPNAV_SPEED_DN": (150.0, mavlink.MAV_PARAM_TYPE_REAL32),
+        "ANGLE_MAX": (3000.0, mavlink.MAV_PARAM_TYPE_INT16),  # centidegrees
+        "COMPASS_DEV_ID": (97539.0, mavlink.MAV_PARAM_TYPE_INT32),  # A1
+    },
+)
+
+
 class ArduCopterModel(FakeAutopilot):
     """The state machine of one ArduCopter SITL instance as a ground station sees it."""
+
+    parameter_set = ARDUCOPTER_PARAMETERS
 
     def __init__(
         self,

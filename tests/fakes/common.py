@@ -318,13 +318,44 @@ class StreamScheduler:
 SETPOINT_TYPES = ("SET_POSITION_TARGET_GLOBAL_INT", "SET_POSITION_TARGET_LOCAL_NED")
 
 
+@dataclass(frozen=True)
+class ParameterSet:
+    """A firmware's parameters as the parameter protocol shows them (recorded: ArduCopter
+    4.7-dev announces 1349 parameters, floats as REAL32 and integers cast to float; PX4 905,
+    integers copied bytewise into the float). `values`: name -> (value, MAV_PARAM_TYPE); the
+    ones not listed exist (they are counted) but are never asked for here."""
+
+    count: int
+    bytewise: bool
+    values: Mapping[str, tuple[float, int]]
+
+
+def _wire_value(value: float, param_type: int, bytewise: bool) -> float:
+    formats = {1: "<B3x", 2: "<b3x", 3: "<H2x", 4: "<h2x", 5: "<I", 6: "<i"}
+    if not bytewise or param_type not in formats:
+        return float(value)
+    return struct.unpack("<f", struct.pack(formats[param_type], int(value)))[0]
+
+
+def _from_wire(value: float, param_type: int, bytewise: bool) -> float:
+    formats = {1: "<B3x", 2: "<b3x", 3: "<H2x", 4: "<h2x", 5: "<I", 6: "<i"}
+    if not bytewise or param_type not in formats:
+        return float(value)
+    return float(struct.unpack(formats[param_type], struct.pack("<f", value))[0])
+
+
 class FakeAutopilot:
     """What both fake autopilots do alike: messages for another system are ignored, ACKs go to
     the sender of the last command, the boot timeline is compressed by `speedup`, the vehicle is
-    a `PointMass`, telemetry streams run on a `StreamScheduler`.
+    a `PointMass`, telemetry streams run on a `StreamScheduler`, the parameter protocol answers
+    from the family's `ParameterSet` (PARAM_REQUEST_READ by name or index, PARAM_SET: one
+    PARAM_VALUE each; an unknown name gets no answer).
 
     A subclass answers `_command`, `_mode_message` (SET_MODE) and `_setpoint`.
     """
+
+    #: The family's parameters (a subclass sets its own).
+    parameter_set: ParameterSet = ParameterSet(count=0, bytewise=False, values={})
 
     def __init__(self, *, system_id: int, speedup: float) -> None:
         self.system_id = system_id
@@ -336,6 +367,8 @@ class FakeAutopilot:
         self.streams = StreamScheduler()
         self._gcs = (255, 190)  # (system, component) of the last command's sender
         self._last_tick: float | None = None
+        self.parameters: dict[str, tuple[float, int]] = dict(self.parameter_set.values)
+        self.param_sets: list[tuple[float, str, float]] = []  # (t, name, value) set by a GCS
 
     @property
     def intervals(self) -> dict[int, float]:
@@ -363,6 +396,30 @@ class FakeAutopilot:
             self._mode_message(msg, now)
         elif kind in SETPOINT_TYPES:
             self._setpoint(msg, now)
+        elif kind == "PARAM_REQUEST_READ":
+            names = list(self.parameters)
+            index = int(msg.param_index)
+            name = msg.param_id.rstrip("\x00") if index < 0 else None
+            if name is None and 0 <= index < len(names):
+                name = names[index]
+            if name in self.parameters:
+                self.outbox.send(now, self._param_value(name))
+        elif kind == "PARAM_SET":
+            name = msg.param_id.rstrip("\x00")
+            if name in self.parameters:
+                param_type = self.parameters[name][1]
+                value = _from_wire(msg.param_value, param_type, self.parameter_set.bytewise)
+                self.parameters[name] = (value, param_type)
+                self.param_sets.append((now, name, value))
+                self.outbox.send(now, self._param_value(name))
+
+    def _param_value(self, name: str):
+        value, param_type = self.parameters[name]
+        names = list(self.parameters)
+        wire = _wire_value(value, param_type, self.parameter_set.bytewise)
+        return mavlink.MAVLink_param_value_message(
+            name.encode(), wire, param_type, self.parameter_set.count, names.index(name)
+        )
 
     def _command(self, msg, now: float) -> None:
         raise NotImplementedError

@@ -48,6 +48,7 @@ from tests.fakes.common import (
     ExtraMessage,
     FakeAutopilot,
     Home,
+    ParameterSet,
     command_ack,
     enu_to_global,
     global_position_int,
@@ -157,8 +158,27 @@ class Px4Params:
     gps_noise_m: float = 0.7  # standard deviation of the GPS offset per axis (m)
 
 
+#: PX4's parameters as a ground station reads them: the count and encoding recorded in P2
+#: (905 parameters, integers copied bytewise: CAL_BARO0_ID 6620172 arrives as 9.28e-39); the
+#: limits of its offboard position control at the firmware's defaults (not read in P1/P2).
+PX4_PARAMETERS = ParameterSet(
+    count=905,
+    bytewise=True,
+    values={
+        "MPC_XY_VEL_MAX": (12.0, mavlink.MAV_PARAM_TYPE_REAL32),  # m/s
+        "MPC_ACC_HOR_MAX": (5.0, mavlink.MAV_PARAM_TYPE_REAL32),  # m/s^2
+        "MPC_ACC_HOR": (3.0, mavlink.MAV_PARAM_TYPE_REAL32),
+        "MPC_Z_VEL_MAX_UP": (3.0, mavlink.MAV_PARAM_TYPE_REAL32),
+        "MPC_TILTMAX_AIR": (45.0, mavlink.MAV_PARAM_TYPE_REAL32),  # degrees
+        "CAL_BARO0_ID": (6620172.0, mavlink.MAV_PARAM_TYPE_INT32),  # P2
+    },
+)
+
+
 class Px4Model(FakeAutopilot):
     """The state machine of one PX4 SITL instance as a ground station sees it."""
+
+    parameter_set = PX4_PARAMETERS
 
     def __init__(
         self,

@@ -108,10 +108,12 @@ class LockstepFleet:
         snapshot = FleetSnapshot.for_due(self.dynamics, self.config.origin, due_lists)
         sent: list[tuple[int, mavlink.MAVLink_message]] = []
         for k, (autopilot, due) in enumerate(zip(self.autopilots, due_lists, strict=True)):
-            for msg_id in due:
-                autopilot.emit(msg_id, snapshot, stamp)
-            sent.extend((k, message) for message in autopilot.outbox)
-            autopilot.outbox.clear()
+            if due:
+                autopilot.emit_due(due, snapshot, stamp)
+            outbox = autopilot.outbox
+            if outbox:
+                sent.extend((k, message) for message in outbox)
+                outbox.clear()
         self.dynamics.step(self.steps_per_tick)
         self._steps += self.steps_per_tick
         return sent
@@ -120,8 +122,10 @@ class LockstepFleet:
         """Messages the vehicles sent while handling deliveries (acks, texts)."""
         sent = []
         for k, autopilot in enumerate(self.autopilots):
-            sent.extend((k, message) for message in autopilot.outbox)
-            autopilot.outbox.clear()
+            outbox = autopilot.outbox
+            if outbox:
+                sent.extend((k, message) for message in outbox)
+                outbox.clear()
         return sent
 
     def true_xy(self) -> np.ndarray:

@@ -214,8 +214,7 @@ class Simulation:
             due_lists.append(autopilot.telemetry.due(stamp.sim_s))
         snapshot = FleetSnapshot.for_due(self.dynamics, self.config.origin, due_lists)
         for autopilot, link, due in zip(self.autopilots, self.links, due_lists, strict=True):
-            for msg_id in due:
-                autopilot.emit(msg_id, snapshot, stamp)
+            autopilot.emit_due(due, snapshot, stamp)
             self._flush(autopilot, link)
 
     def _receive(self) -> list[_Arrival]:

@@ -1,9 +1,12 @@
 """Telemetry of one simulated vehicle: what it streams, how often, and the message contents.
 
-Each message builder reads an :class:`~vehicles.autopilot.Autopilot` and a per-tick
-:class:`FleetSnapshot` and returns a pymavlink message (ArduCopter field conventions: NED
-velocities in cm/s, altitudes in mm, angles in centidegrees). Rates are in simulated time and
-can be changed with ``MAV_CMD_SET_MESSAGE_INTERVAL`` (no I/O here: the sim sends).
+Each message builder is a function of the autopilot's frozen
+:class:`~vehicles.autopilot.AutopilotStatus` (mode, arming, battery, home...), the per-tick
+:class:`FleetSnapshot` (the vehicles' physical state) and the :class:`~vehicles.autopilot.Stamp`,
+and returns a pymavlink message (ArduCopter field conventions: NED velocities in cm/s,
+altitudes in mm, angles in centidegrees); it cannot change the autopilot. Rates are in
+simulated time and can be changed with ``MAV_CMD_SET_MESSAGE_INTERVAL`` (no I/O here: the sim
+sends).
 """
 
 from __future__ import annotations
@@ -21,7 +24,8 @@ from vehicles.dynamics import GRAVITY_MPS2, FleetDynamics
 from vehicles.frames import GeodeticOrigin
 
 if TYPE_CHECKING:
-    from vehicles.autopilot import Autopilot, Stamp
+    from vehicles.autopilot.status import AutopilotStatus
+    from vehicles.autopilot.types import Stamp
 
 MAX_MESSAGE_RATE_HZ = 50.0
 UINT16_MAX = 65535
@@ -138,10 +142,11 @@ class TelemetrySchedule:
 
 
 class FleetSnapshot:
-    """Geodetic positions at one control tick, computed once per vehicle and on demand.
+    """The fleet at one control tick as the telemetry reads it: geodetic and estimated positions
+    and attitudes, each computed at most once per vehicle and on demand (plain floats).
 
     The sim calls :meth:`prefetch` with the vehicles whose due messages need them, so the
-    conversion runs vectorised once per tick; anything else is converted one by one.
+    geodetic conversion runs vectorised once per tick; anything else is converted one by one.
     """
 
     def __init__(self, dynamics: FleetDynamics, origin: GeodeticOrigin) -> None:
@@ -149,6 +154,8 @@ class FleetSnapshot:
         self.origin = origin
         self._estimated: dict[int, tuple[float, float, float]] = {}
         self._true: dict[int, tuple[float, float, float]] = {}
+        self._estimated_enu: dict[int, tuple[float, float, float]] = {}
+        self._attitude: dict[int, tuple[float, float, float]] = {}
 
     @classmethod
     def for_due(
@@ -180,9 +187,15 @@ class FleetSnapshot:
         points = list(zip(lat.tolist(), lon.tolist(), alt.tolist(), strict=True))
         self._estimated.update(zip(estimated, points[: len(estimated)], strict=True))
         self._true.update(zip(true, points[len(estimated) :], strict=True))
+        local = map(tuple, enu[: len(estimated)].tolist())
+        self._estimated_enu.update(zip(estimated, local, strict=True))
 
-    def estimated(self, index: int) -> np.ndarray:
-        return self.dynamics.estimated(index)
+    def estimated_enu(self, index: int) -> tuple[float, float, float]:
+        """Vehicle ``index``'s estimated position, local ENU metres."""
+        point = self._estimated_enu.get(index)
+        if point is None:
+            point = self._estimated_enu[index] = tuple(self.dynamics.estimated(index).tolist())
+        return point
 
     def estimated_geodetic(self, index: int) -> tuple[float, float, float]:
         if index not in self._estimated:
@@ -194,6 +207,13 @@ class FleetSnapshot:
             self.prefetch([], [index])
         return self._true[index]
 
+    def attitude(self, index: int) -> tuple[float, float, float]:
+        """Vehicle ``index``'s roll, pitch and yaw (rad, see :func:`attitude_of`)."""
+        attitude = self._attitude.get(index)
+        if attitude is None:
+            attitude = self._attitude[index] = attitude_of(self.dynamics, index)
+        return attitude
+
 
 def _boot_ms(stamp: Stamp) -> int:
     return int(stamp.sim_s * 1000.0) & 0xFFFFFFFF
@@ -204,20 +224,20 @@ def _deg_e7(value: float) -> int:
 
 
 def _clamp_int(value: float, low: int, high: int) -> int:
+    """``value`` rounded and clamped to [low, high]; 0 if it is not finite."""
     if not math.isfinite(value):
         return 0
-    return int(max(low, min(high, round(value))))
+    rounded = round(value)
+    return low if rounded < low else high if rounded > high else int(rounded)
 
 
-def attitude_of(ap: Autopilot) -> tuple[float, float, float]:
+def attitude_of(dynamics: FleetDynamics, index: int) -> tuple[float, float, float]:
     """Roll, pitch (rad) that produce the vehicle's thrust acceleration, and its yaw (NED)."""
-    dyn = ap.dynamics
-    i = ap.index
-    acc = dyn.thrust_acceleration[i]
-    yaw = float(dyn.yaw[i])
-    up = float(acc[2]) + GRAVITY_MPS2
-    forward = float(acc[0]) * math.sin(yaw) + float(acc[1]) * math.cos(yaw)
-    right = float(acc[0]) * math.cos(yaw) - float(acc[1]) * math.sin(yaw)
+    east, north, up = dynamics.thrust_acceleration[index].tolist()
+    yaw = float(dynamics.yaw[index])
+    up = up + GRAVITY_MPS2
+    forward = east * math.sin(yaw) + north * math.cos(yaw)
+    right = east * math.cos(yaw) - north * math.sin(yaw)
     pitch = -math.atan2(forward, up)
     roll = math.atan2(right, math.hypot(forward, up))
     return roll, pitch, yaw
@@ -235,20 +255,24 @@ def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, fl
     )
 
 
-def heartbeat(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+def heartbeat(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
     return mavlink.MAVLink_heartbeat_message(
         mavlink.MAV_TYPE_QUADROTOR,
         mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-        ap.base_mode(stamp),
-        ap.mode,
-        ap.system_status(stamp),
+        status.base_mode,
+        status.mode,
+        status.system_status,
         3,
     )
 
 
-def sys_status(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
-    battery = ap.battery()
-    health = SENSORS if ap.prearm_ok(stamp) else SENSORS & ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
+def sys_status(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    battery = status.battery
+    health = SENSORS if status.prearm_ok else SENSORS & ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
     return mavlink.MAVLink_sys_status_message(
         SENSORS,
         SENSORS,
@@ -258,7 +282,7 @@ def sys_status(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVL
         _clamp_int(battery.current_a * 100, 0, INT16_MAX),
         _clamp_int(battery.remaining_fraction * 100, 0, 100),
         0,
-        min(ap.comm_errors, UINT16_MAX),
+        min(status.comm_errors, UINT16_MAX),
         0,
         0,
         0,
@@ -266,8 +290,10 @@ def sys_status(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVL
     )
 
 
-def battery_status(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
-    battery = ap.battery()
+def battery_status(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    battery = status.battery
     voltages = [_clamp_int(battery.voltage_v * 1000, 0, UINT16_MAX - 1)] + [UINT16_MAX] * 9
     remaining = battery.remaining_fraction
     charge_state = (
@@ -293,62 +319,77 @@ def battery_status(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.
 
 
 def global_position_int(
-    ap: Autopilot, snap: FleetSnapshot, stamp: Stamp
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
 ) -> mavlink.MAVLink_message:
-    i = ap.index
+    i = status.index
+    dyn = snap.dynamics
     lat, lon, alt = snap.estimated_geodetic(i)
-    est = snap.estimated(i)
-    vel = ap.dynamics.velocity[i]
-    heading = math.degrees(float(ap.dynamics.yaw[i])) % 360.0
+    up = snap.estimated_enu(i)[2]
+    v_east, v_north, v_up = dyn.velocity[i].tolist()
+    heading = math.degrees(float(dyn.yaw[i])) % 360.0
     return mavlink.MAVLink_global_position_int_message(
         _boot_ms(stamp),
         _deg_e7(lat),
         _deg_e7(lon),
         _clamp_int(alt * 1000, -(2**31), 2**31 - 1),
-        _clamp_int((float(est[2]) - ap.home_enu[2]) * 1000, -(2**31), 2**31 - 1),
-        _clamp_int(float(vel[1]) * 100, -32768, 32767),
-        _clamp_int(float(vel[0]) * 100, -32768, 32767),
-        _clamp_int(-float(vel[2]) * 100, -32768, 32767),
+        _clamp_int((up - status.home_enu[2]) * 1000, -(2**31), 2**31 - 1),
+        _clamp_int(v_north * 100, -32768, 32767),
+        _clamp_int(v_east * 100, -32768, 32767),
+        _clamp_int(-v_up * 100, -32768, 32767),
         _clamp_int(heading * 100, 0, 35999),
     )
 
 
-def local_position_ned(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
-    i = ap.index
-    rel = snap.estimated(i) - ap.ekf_origin_enu
-    vel = ap.dynamics.velocity[i]
+def local_position_ned(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    i = status.index
+    east, north, up = snap.estimated_enu(i)
+    origin_east, origin_north, origin_up = status.ekf_origin_enu
+    v_east, v_north, v_up = snap.dynamics.velocity[i].tolist()
     return mavlink.MAVLink_local_position_ned_message(
         _boot_ms(stamp),
-        float(rel[1]),
-        float(rel[0]),
-        -float(rel[2]),
-        float(vel[1]),
-        float(vel[0]),
-        -float(vel[2]),
+        north - origin_north,
+        east - origin_east,
+        -(up - origin_up),
+        v_north,
+        v_east,
+        -v_up,
     )
 
 
-def attitude(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
-    roll, pitch, yaw = attitude_of(ap)
-    rates = ap.attitude_rates(roll, pitch, yaw, stamp)
+def attitude(status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    """ATTITUDE; its rates are the differences from the last ATTITUDE reported (the autopilot
+    notes each one it sends)."""
+    roll, pitch, yaw = snap.attitude(status.index)
+    previous = status.reported_attitude
+    if previous is None or stamp.sim_s <= previous[0]:
+        rates = (0.0, 0.0, 0.0)
+    else:
+        dt = stamp.sim_s - previous[0]
+        dyaw = math.remainder(yaw - previous[3], 2 * math.pi)
+        rates = ((roll - previous[1]) / dt, (pitch - previous[2]) / dt, dyaw / dt)
     return mavlink.MAVLink_attitude_message(_boot_ms(stamp), roll, pitch, yaw, *rates)
 
 
-def sim_state(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
-    i = ap.index
+def sim_state(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    i = status.index
+    dyn = snap.dynamics
     lat, lon, alt = snap.true_geodetic(i)
-    roll, pitch, yaw = attitude_of(ap)
-    acc = ap.dynamics.thrust_acceleration[i]
-    vel = ap.dynamics.velocity[i]
-    dist = ap.dynamics.config.disturbances
+    roll, pitch, yaw = snap.attitude(i)
+    a_east, a_north, a_up = dyn.thrust_acceleration[i].tolist()
+    v_east, v_north, v_up = dyn.velocity[i].tolist()
+    dist = dyn.config.disturbances
     return mavlink.MAVLink_sim_state_message(
         *_quaternion(roll, pitch, yaw),
         roll,
         pitch,
         yaw,
-        float(acc[1]),
-        float(acc[0]),
-        -float(acc[2]) - GRAVITY_MPS2,
+        a_north,
+        a_east,
+        -a_up - GRAVITY_MPS2,
         0.0,
         0.0,
         0.0,
@@ -357,21 +398,25 @@ def sim_state(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLi
         alt,
         dist.navigation_sigma_m,
         dist.navigation_sigma_vertical_m,
-        float(vel[1]),
-        float(vel[0]),
-        -float(vel[2]),
+        v_north,
+        v_east,
+        -v_up,
         _deg_e7(lat),
         _deg_e7(lon),
     )
 
 
-def extended_sys_state(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
-    return mavlink.MAVLink_extended_sys_state_message(mavlink.MAV_VTOL_STATE_MC, ap.landed_state())
+def extended_sys_state(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_extended_sys_state_message(
+        mavlink.MAV_VTOL_STATE_MC, status.landed_state
+    )
 
 
-def vfr_hud(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
-    i = ap.index
-    dyn = ap.dynamics
+def vfr_hud(status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+    i = status.index
+    dyn = snap.dynamics
     vel = dyn.velocity[i]
     air = vel - dyn.wind[i]
     _, _, alt = snap.estimated_geodetic(i)
@@ -388,16 +433,19 @@ def vfr_hud(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink
     )
 
 
-def home_position(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
-    lat, lon, alt = ap.origin.to_geodetic(ap.home_enu)
-    rel = ap.home_enu - ap.ekf_origin_enu
+def home_position(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    lat, lon, alt = snap.origin.to_geodetic(status.home_enu)
+    east, north, up = status.home_enu
+    origin_east, origin_north, origin_up = status.ekf_origin_enu
     return mavlink.MAVLink_home_position_message(
         _deg_e7(float(lat[0])),
         _deg_e7(float(lon[0])),
         _clamp_int(float(alt[0]) * 1000, -(2**31), 2**31 - 1),
-        float(rel[1]),
-        float(rel[0]),
-        -float(rel[2]),
+        north - origin_north,
+        east - origin_east,
+        -(up - origin_up),
         [1.0, 0.0, 0.0, 0.0],
         0.0,
         0.0,
@@ -406,8 +454,10 @@ def home_position(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.M
     )
 
 
-def gps_global_origin(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
-    lat, lon, alt = ap.origin.to_geodetic(ap.ekf_origin_enu)
+def gps_global_origin(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    lat, lon, alt = snap.origin.to_geodetic(status.ekf_origin_enu)
     return mavlink.MAVLink_gps_global_origin_message(
         _deg_e7(float(lat[0])),
         _deg_e7(float(lon[0])),
@@ -416,11 +466,13 @@ def gps_global_origin(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavli
     )
 
 
-def gps_raw_int(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
-    i = ap.index
+def gps_raw_int(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    i = status.index
     lat, lon, alt = snap.estimated_geodetic(i)
-    vel = ap.dynamics.velocity[i]
-    dist = ap.dynamics.config.disturbances
+    vel = snap.dynamics.velocity[i]
+    dist = snap.dynamics.config.disturbances
     course = math.degrees(math.atan2(float(vel[0]), float(vel[1]))) % 360.0
     return mavlink.MAVLink_gps_raw_int_message(
         int(stamp.sim_s * 1e6),
@@ -443,12 +495,12 @@ def gps_raw_int(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAV
 
 
 def position_target_local_ned(
-    ap: Autopilot, snap: FleetSnapshot, stamp: Stamp
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
 ) -> mavlink.MAVLink_message:
-    i = ap.index
-    dyn = ap.dynamics
+    i = status.index
+    dyn = snap.dynamics
     pos, vel, acc = dyn.reference_now(i)
-    rel = pos - ap.ekf_origin_enu
+    rel = pos - np.array(status.ekf_origin_enu)
     mask = 0b110000000000  # yaw and yaw rate not reported
     if not dyn.use_position[i]:
         mask |= 0b111
@@ -474,17 +526,19 @@ def position_target_local_ned(
     )
 
 
-def fleet_speed(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message | None:
-    speed = ap.fleet_speed(stamp)
+def fleet_speed(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message | None:
+    speed = status.fleet_speed_mps
     if speed is None:
         return None
     return mavlink.MAVLink_named_value_float_message(_boot_ms(stamp), b"FLEET_SPD", speed)
 
 
 def mission_time(
-    ap: Autopilot, snap: FleetSnapshot, stamp: Stamp
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
 ) -> mavlink.MAVLink_message | None:
-    now = ap.mission_clock.now(stamp.sim_s)
+    now = status.mission_time_s
     if now is None:
         return None
     return mavlink.MAVLink_named_value_int_message(
@@ -492,7 +546,9 @@ def mission_time(
     )
 
 
-def autopilot_version(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavlink.MAVLink_message:
+def autopilot_version(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
     return mavlink.MAVLink_autopilot_version_message(
         CAPABILITIES,
         FLIGHT_SW_VERSION,
@@ -504,12 +560,14 @@ def autopilot_version(ap: Autopilot, snap: FleetSnapshot, stamp: Stamp) -> mavli
         [0] * 8,
         0,
         0,
-        ap.sysid,
+        status.sysid,
         [0] * 18,
     )
 
 
-Builder = Callable[["Autopilot", FleetSnapshot, "Stamp"], "mavlink.MAVLink_message | None"]
+#: A message builder: a function of the status, the snapshot and the moment (None: nothing to
+#: send yet, e.g. FLEET_SPD before any speed change).
+Builder = Callable[["AutopilotStatus", FleetSnapshot, "Stamp"], "mavlink.MAVLink_message | None"]
 
 NEEDS_ESTIMATED_GEODETIC = frozenset(
     {

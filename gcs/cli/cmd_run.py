@@ -253,6 +253,15 @@ def run_command(args: argparse.Namespace) -> int:
         recorder.event(level, notice, time.monotonic(), name="signing")
         signing.record_to(recorder.event)
 
+        forwarder = None  # the --out tools' outputs: opened before anything starts
+        if args.out:
+            try:
+                forwarder = Forwarder(args.out, readonly=args.out_readonly)
+            except OSError as error:
+                raise InputError(
+                    None, "--out", f"a MAVLink connection string we can open ({error})"
+                ) from None
+            stack.callback(forwarder.close)
         if simulated:
             leaders: dict[int, list[tuple[float, float]]] = {}
             for change in mission.speed.changes:
@@ -271,15 +280,6 @@ def run_command(args: argparse.Namespace) -> int:
 
         operator = OperatorSocket(socket_path_for(log_path))
         stack.callback(operator.close)
-        forwarder = None
-        if args.out:
-            try:
-                forwarder = Forwarder(args.out, readonly=args.out_readonly)
-            except OSError as error:
-                raise InputError(
-                    None, "--out", f"a MAVLink connection string we can open ({error})"
-                ) from None
-            stack.callback(forwarder.close)
         timing = DriverTiming(speedup=args.speedup)
         drivers = []
         for index, url in enumerate(urls):

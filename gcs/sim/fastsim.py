@@ -207,7 +207,8 @@ class _LockstepMission:
                 origin=GeodeticOrigin(origin.lat, origin.lon, origin.alt),
                 seed=mission.sim.seed,
                 dynamics=mission_dynamics(mission),
-                autopilot=AutopilotConfig(),
+                # WPNAV_SPEED (the guided limit the driver reads) at the airframe's max speed
+                autopilot=AutopilotConfig(waypoint_speed_mps=mission.vehicle.max_speed),
                 leader_requests={uav: tuple(r) for uav, r in leaders.items()},
                 quiet_streams=FAST_QUIET_STREAMS,
             )

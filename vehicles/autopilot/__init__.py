@@ -1,0 +1,50 @@
+"""ArduCopter-compatible MAVLink behaviour of one simulated vehicle (no sockets, no clocks).
+
+The sim hands each decoded message to :meth:`Autopilot.handle` and calls :meth:`Autopilot.tick`
+at the control rate with the current :class:`Stamp` (simulated and wall-clock seconds); the
+autopilot writes references into the shared :class:`~vehicles.dynamics.FleetDynamics` and
+appends the messages to send to ``outbox``.
+
+Identity and modes follow ArduCopter (``../shared/sitl/README.md``): HEARTBEAT type 2
+(quadrotor), autopilot 3 (ArduPilotMega), custom_mode = Copter mode number (STABILIZE 0,
+GUIDED 4, LOITER 5, RTL 6, LAND 9, BRAKE 17); ``MAV_CMD_DO_SET_MODE`` is acknowledged,
+``SET_MODE`` is not; an unknown mode gets STATUSTEXT ``No such mode N``; arming is refused
+outside GUIDED and LOITER with ``Arm: ...`` and ACK FAILED; ``MAV_CMD_NAV_TAKEOFF`` needs GUIDED,
+armed and landed; landing ends in an automatic disarm; position targets outside GUIDED are
+ignored silently. Differences from ArduCopter, on purpose: refusals always carry a STATUSTEXT
+reason; in GUIDED a stream of ``SET_POSITION_TARGET_*`` that stops for ``setpoint_timeout_s``
+makes the vehicle brake and hold (PX4's offboard-loss behaviour; it stays in GUIDED and follows
+again when setpoints resume); losing the GCS (no valid message from its system id) makes
+it hold (BRAKE), then LAND.
+
+Timeouts count simulated time and never fire before a wall-clock floor (``wall_floor_s``), so a
+busy machine at a high speedup does not trip them. See :mod:`vehicles.fleet_speed` for the
+mission clock, speed changes and leader requests.
+
+One module per job: ``core`` (the :class:`Autopilot` facade: state, routing, tick, telemetry),
+``status`` (the frozen :class:`AutopilotStatus` the telemetry reads), ``modes``, ``failsafes``,
+``commands``, ``setpoints``, ``speed``, ``parameters``, ``missions``, ``config``, ``types``.
+"""
+
+from vehicles.autopilot.commands import FORCE_ARM_MAGIC, FORCE_DISARM_MAGIC
+from vehicles.autopilot.config import AutopilotConfig, FailsafeConfig
+from vehicles.autopilot.core import Autopilot
+from vehicles.autopilot.setpoints import MAX_EXTRAPOLATION_S
+from vehicles.autopilot.status import AutopilotStatus, BatteryState
+from vehicles.autopilot.types import ARMABLE_MODES, AUTOPILOT_COMPONENT, Guided, Mode, Stamp
+
+__all__ = [
+    "ARMABLE_MODES",
+    "AUTOPILOT_COMPONENT",
+    "FORCE_ARM_MAGIC",
+    "FORCE_DISARM_MAGIC",
+    "MAX_EXTRAPOLATION_S",
+    "Autopilot",
+    "AutopilotConfig",
+    "AutopilotStatus",
+    "BatteryState",
+    "FailsafeConfig",
+    "Guided",
+    "Mode",
+    "Stamp",
+]

@@ -107,20 +107,19 @@ class LimitExceeded:
 
 def exceeded(limits: AutopilotLimits, max_speed: float, max_acceleration: float):
     """The limits the mission's `max_speed` / `max_acceleration` go beyond (empty: none)."""
-    out = []
     p = limits.parameters
-    if max_speed > limits.max_speed * (1 + TOLERANCE):
-        out.append(
-            LimitExceeded(
-                limits.uav, p.speed, limits.speed_raw, limits.max_speed,
-                "vehicle.max_speed", max_speed,
-            )
-        )  # fmt: skip
-    if max_acceleration > limits.max_acceleration * (1 + TOLERANCE):
-        out.append(
-            LimitExceeded(
-                limits.uav, p.acceleration, limits.acceleration_raw, limits.max_acceleration,
-                "vehicle.max_acceleration", max_acceleration,
-            )
-        )  # fmt: skip
-    return out
+    checks = (
+        (p.speed, limits.speed_raw, limits.max_speed, "vehicle.max_speed", max_speed),
+        (
+            p.acceleration,
+            limits.acceleration_raw,
+            limits.max_acceleration,
+            "vehicle.max_acceleration",
+            max_acceleration,
+        ),
+    )
+    return [
+        LimitExceeded(limits.uav, parameter, raw, allowed, key, assumed)
+        for parameter, raw, allowed, key, assumed in checks
+        if assumed > allowed * (1 + TOLERANCE)
+    ]

@@ -330,18 +330,20 @@ class ParameterSet:
     values: Mapping[str, tuple[float, int]]
 
 
+#: struct formats of the integer MAV_PARAM_TYPEs 1-6, for the bytewise encoding.
+_INTEGER_FORMATS = {1: "<B3x", 2: "<b3x", 3: "<H2x", 4: "<h2x", 5: "<I", 6: "<i"}
+
+
 def _wire_value(value: float, param_type: int, bytewise: bool) -> float:
-    formats = {1: "<B3x", 2: "<b3x", 3: "<H2x", 4: "<h2x", 5: "<I", 6: "<i"}
-    if not bytewise or param_type not in formats:
+    if not bytewise or param_type not in _INTEGER_FORMATS:
         return float(value)
-    return struct.unpack("<f", struct.pack(formats[param_type], int(value)))[0]
+    return struct.unpack("<f", struct.pack(_INTEGER_FORMATS[param_type], int(value)))[0]
 
 
 def _from_wire(value: float, param_type: int, bytewise: bool) -> float:
-    formats = {1: "<B3x", 2: "<b3x", 3: "<H2x", 4: "<h2x", 5: "<I", 6: "<i"}
-    if not bytewise or param_type not in formats:
+    if not bytewise or param_type not in _INTEGER_FORMATS:
         return float(value)
-    return float(struct.unpack(formats[param_type], struct.pack("<f", value))[0])
+    return float(struct.unpack(_INTEGER_FORMATS[param_type], struct.pack("<f", value))[0])
 
 
 class FakeAutopilot:

@@ -2,7 +2,8 @@
 
 `fleetwire.signing`: MAVLink 2 signing and the fleet key file; `fleetwire.messages`: the
 fleet's identities, message names and encodings; `fleetwire.modes`: autopilot mode numbers,
-from pymavlink's own maps. Imports pymavlink only (never `gcs`, `vehicles` or `planner`).
+from pymavlink's own maps; `fleetwire.geodesy`: the local ENU frame <-> WGS84. Imports
+pymavlink only, and numpy and pymap3d for the geodesy (never `gcs`, `vehicles` or `planner`).
 """
 
 import os

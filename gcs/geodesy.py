@@ -2,21 +2,19 @@
 
 The mission's local frame (CONTRACTS.md) has x east, y north in metres and altitudes above the
 origin; `Origin` anchors it on the WGS84 ellipsoid. Conversions are vectorised over arrays.
+ENU -> WGS84 is `fleetwire.geodesy` (pymap3d's closed form without its per-call overhead: the
+core converts every tick's setpoints), shared with the simulated vehicles.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property
 
 import numpy as np
 import pymap3d
 
-#: WGS84 (the ellipsoid pymap3d uses by default).
-_WGS84 = pymap3d.Ellipsoid.from_name("wgs84")
-_A = _WGS84.semimajor_axis
-_E2 = 1.0 - (_WGS84.semiminor_axis / _A) ** 2
+from fleetwire.geodesy import EnuFrame
 
 
 @dataclass(frozen=True)
@@ -27,6 +25,11 @@ class Origin:
     lon: float
     alt: float
 
+    @cached_property
+    def enu_frame(self) -> EnuFrame:
+        """The local frame this origin anchors (ENU -> WGS84)."""
+        return EnuFrame(self.lat, self.lon, self.alt)
+
 
 def geodetic_to_enu(
     lat: np.ndarray | float, lon: np.ndarray | float, alt: np.ndarray | float, origin: Origin
@@ -36,48 +39,18 @@ def geodetic_to_enu(
     return np.stack(np.broadcast_arrays(e, n, u), axis=-1).astype(float)
 
 
-def _ecef(lat: float, lon: float, alt: float) -> tuple[float, float, float]:
-    """WGS84 geodetic (degrees, m) -> ECEF (m): the closed form pymap3d's geodetic2ecef uses."""
-    phi, lam = math.radians(lat), math.radians(lon)
-    sin_phi, cos_phi = math.sin(phi), math.cos(phi)
-    normal = _A / math.sqrt(1.0 - _E2 * sin_phi * sin_phi)
-    return (
-        (normal + alt) * cos_phi * math.cos(lam),
-        (normal + alt) * cos_phi * math.sin(lam),
-        (normal * (1.0 - _E2) + alt) * sin_phi,
-    )
-
-
-@lru_cache(maxsize=16)
-def _frame(origin: Origin) -> tuple[tuple[float, float, float], tuple[float, ...]]:
-    """The origin's ECEF position and the ECEF -> ENU rotation (row-major)."""
-    phi, lam = math.radians(origin.lat), math.radians(origin.lon)
-    sp, cp, sl, cl = math.sin(phi), math.cos(phi), math.sin(lam), math.cos(lam)
-    rotation = (-sl, cl, 0.0, -sp * cl, -sp * sl, cp, cp * cl, cp * sl, sp)
-    return _ecef(origin.lat, origin.lon, origin.alt), rotation
-
-
 def geodetic_point_to_enu(lat: float, lon: float, alt: float, origin: Origin) -> np.ndarray:
     """One WGS84 point -> (3,) east, north, up: the same exact closed form as
     `geodetic_to_enu`, in scalar arithmetic (the drivers convert every position message, and
-    numpy's per-call overhead dominates for one point)."""
-    (x0, y0, z0), r = _frame(origin)
-    x, y, z = _ecef(lat, lon, alt)
-    dx, dy, dz = x - x0, y - y0, z - z0
-    return np.array(
-        [
-            r[0] * dx + r[1] * dy,
-            r[3] * dx + r[4] * dy + r[5] * dz,
-            r[6] * dx + r[7] * dy + r[8] * dz,
-        ]
-    )
+    numpy's per-call overhead dominates for one point; `fleetwire.geodesy`)."""
+    return np.array(origin.enu_frame.point_to_local(lat, lon, alt))
 
 
 def enu_to_geodetic(
     east: np.ndarray | float, north: np.ndarray | float, up: np.ndarray | float, origin: Origin
 ) -> np.ndarray:
     """Local east, north, up (metres) -> (..., 3) latitude, longitude (degrees), altitude (m)."""
-    lat, lon, alt = pymap3d.enu2geodetic(east, north, up, origin.lat, origin.lon, origin.alt)
+    lat, lon, alt = origin.enu_frame.to_geodetic(east, north, up)
     return np.stack(np.broadcast_arrays(lat, lon, alt), axis=-1).astype(float)
 
 

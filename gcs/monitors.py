@@ -15,6 +15,8 @@ measure the same thing.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -94,7 +96,7 @@ class SafetyMonitor:
             events += self._condition(
                 ("tracking", index),
                 error >= self.safety_margin,
-                MonitorEvent(
+                lambda index=index, error=error: MonitorEvent(
                     t,
                     "error",
                     "tracking",
@@ -109,49 +111,57 @@ class SafetyMonitor:
     def positions(self, t: float, xy: np.ndarray) -> list[MonitorEvent]:
         """Distances and connectivity of the fleet at one instant; `xy` (N, 2), NaN = unknown."""
         known = np.isfinite(xy).all(axis=1)
-        if not known.any():
+        known_count = np.count_nonzero(known)
+        if not known_count:
             return []
-        ids = np.flatnonzero(known) + 1
+        everyone = known_count == len(known)
         sample = check_positions(
-            xy[known][None], self.obstacles, self.base_stations, self.radio_range
+            (xy if everyone else xy[known])[None],
+            self.obstacles,
+            self.base_stations,
+            self.radio_range,
         )
         stats = self.stats
         pair = float(sample.min_uav_uav_m[0])
         obstacle = float(sample.min_uav_obstacle_m[0])
         stats.min_uav_uav_m = min(stats.min_uav_uav_m, pair)
         stats.min_uav_obstacle_m = min(stats.min_uav_obstacle_m, obstacle)
-        if known.all():
+        if everyone:
             stats.samples += 1
             stats.connected_samples += int(sample.connected[0])
             stats.last_connected = bool(sample.connected[0])
         events = []
         rho, radius = self.safety_margin, self.vehicle_radius
-        if np.isfinite(pair):
-            who = self._closest_pair(xy[known], ids)
+        if math.isfinite(pair):
+
+            def who() -> str:
+                return self._closest_pair(xy[known], np.flatnonzero(known) + 1)
+
             events += self._condition(
                 ("uav_collision",),
                 pair < 2 * radius,
-                MonitorEvent(
+                lambda: MonitorEvent(
                     t,
                     "error",
                     "collision_uav",
-                    f"UAVs {who}: {pair:.2f} m apart, below 2 x vehicle radius ({2 * radius:g} m)",
+                    f"UAVs {who()}: {pair:.2f} m apart, below 2 x vehicle radius "
+                    f"({2 * radius:g} m)",
                     fatal=True,
                 ),
             )
             events += self._condition(
                 ("uav_near",),
                 pair < 2 * rho,
-                MonitorEvent(
-                    t, "warning", "near_uav", f"UAVs {who}: {pair:.2f} m apart (< 2 rho_c)"
+                lambda: MonitorEvent(
+                    t, "warning", "near_uav", f"UAVs {who()}: {pair:.2f} m apart (< 2 rho_c)"
                 ),
                 cleared=pair > 2 * rho + NEAR_HYSTERESIS_M,
             )
-        if np.isfinite(obstacle):
+        if math.isfinite(obstacle):
             events += self._condition(
                 ("obstacle_collision",),
                 obstacle < radius,
-                MonitorEvent(
+                lambda: MonitorEvent(
                     t,
                     "error",
                     "collision_obstacle",
@@ -162,7 +172,7 @@ class SafetyMonitor:
             events += self._condition(
                 ("obstacle_near",),
                 obstacle < rho,
-                MonitorEvent(
+                lambda: MonitorEvent(
                     t, "warning", "near_obstacle", f"a UAV is {obstacle:.2f} m from an obstacle"
                 ),
                 cleared=obstacle > rho + NEAR_HYSTERESIS_M,
@@ -170,13 +180,18 @@ class SafetyMonitor:
         return events
 
     def _condition(
-        self, key: tuple, active: bool, event: MonitorEvent, cleared: bool | None = None
+        self,
+        key: tuple,
+        active: bool,
+        event: Callable[[], MonitorEvent],
+        cleared: bool | None = None,
     ) -> list[MonitorEvent]:
-        """Report `event` when the condition starts; forget it once `cleared` (default: as soon
-        as it is no longer active)."""
+        """Report `event()` when the condition starts (the event, its text and who it names are
+        only made then); forget it once `cleared` (default: as soon as it is no longer
+        active)."""
         if active and key not in self._active:
             self._active.add(key)
-            return [event]
+            return [event()]
         if (not active) if cleared is None else cleared:
             self._active.discard(key)
         return []

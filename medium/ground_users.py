@@ -10,6 +10,7 @@ starts i/M of a period late, so sources do not all send at the same instant.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -48,13 +49,14 @@ class CbrTraffic:
         self.period_s = packet_bytes * 8.0 / rates
         count = len(rates)
         self._next = start_s + self.period_s * np.arange(count) / max(count, 1)
+        self.next_due_s = float(self._next.min()) if count else math.inf
 
     def __len__(self) -> int:
         return len(self.period_s)
 
     def due(self, until_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Sources and send times of every packet sent at or before `until_s` (in time order)."""
-        if not len(self.period_s):
+        if until_s < self.next_due_s:  # nothing due (always so without sources)
             return np.zeros(0, dtype=int), np.zeros(0)
         counts = np.floor((until_s - self._next) / self.period_s).astype(int) + 1
         counts = np.maximum(counts, 0)
@@ -65,6 +67,7 @@ class CbrTraffic:
         index = np.arange(len(sources)) - np.repeat(np.cumsum(counts) - counts, counts)
         times = first + index * np.repeat(self.period_s, counts)
         self._next = self._next + counts * self.period_s
+        self.next_due_s = float(self._next.min())
         order = np.argsort(times, kind="stable")
         return sources[order], times[order]
 
@@ -108,7 +111,7 @@ class GroundUsers:
         self, now_s: float, topology: Topology, channel: Channel, stats: RadioStats
     ) -> int:
         """Every ground-user packet due by `now_s`, routed on `topology` (this instant)."""
-        if not self.users:
+        if not self.users or now_s < self.traffic.next_due_s:
             return 0
         hops = topology.hops_of_ground_nodes(self.positions)
         return offer(self.traffic, now_s, hops, "ground", channel, stats)

@@ -139,7 +139,8 @@ class MediumModel:
         self.channel = Channel(radio)
         self.ground_users = GroundUsers(ground_users, packet_bytes)
         self.uav_data = CbrTraffic([uav_data_bps] * count, packet_bytes) if uav_data_bps else None
-        self._topology: Topology | None = None
+        self._topology: Topology | None = None  # None: the positions changed since
+        self._last_topology: Topology | None = None  # the last one computed
         self._topology_time = -math.inf
         self._next_sample = 0.0
         self._reported = 0  # fleet packets already listed in a report
@@ -159,20 +160,26 @@ class MediumModel:
 
     def positions_at(self, sim_s: float) -> np.ndarray:
         """True horizontal positions (N, 2) at `sim_s`: last sample moved on by its velocity."""
-        age = np.clip(sim_s - self.position_time, 0.0, self.position_horizon_s)
+        age = np.minimum(np.maximum(sim_s - self.position_time, 0.0), self.position_horizon_s)
         return self.position + self.velocity * age[:, None]
 
     def topology_at(self, sim_s: float) -> Topology:
         """The radio graph at `sim_s` (reused for _TOPOLOGY_MAX_AGE_S if nothing moved)."""
         if self._topology is None or abs(sim_s - self._topology_time) > _TOPOLOGY_MAX_AGE_S:
-            self._topology = topology(self.stations, self.positions_at(sim_s), self.radio.range_m)
+            self._topology = topology(
+                self.stations, self.positions_at(sim_s), self.radio.range_m, self._last_topology
+            )
+            self._last_topology = self._topology
             self._topology_time = sim_s
         return self._topology
 
     def route(self, kind: str, uav: int, sim_s: float) -> tuple[int, float | None]:
         """Hops and delay (s) of one packet to/from UAV `uav` sent at `sim_s` (delay None:
         dropped, no path or lost on a hop); counted in `stats`."""
-        hops = int(self.topology_at(sim_s).hops[uav])
+        current = self._topology
+        if current is None or abs(sim_s - self._topology_time) > _TOPOLOGY_MAX_AGE_S:
+            current = self.topology_at(sim_s)
+        hops = current.hop_counts[uav]
         delay = self.channel.transit(hops) if hops > 0 else None
         self.stats.packet(kind, uav, sim_s, hops, delay)
         return hops, delay

@@ -21,12 +21,14 @@ import itertools
 import math
 from collections.abc import Hashable
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 
 #: Distances equal to the range count as links (the planner's tolerance, 1e-6 m).
 DISTANCE_TOLERANCE = 1e-6
+_NO_RELAY = np.iinfo(int).max  # a ground node no connected UAV hears
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,7 @@ class Topology:
     """The radio graph at one instant.
 
     `hops[k]`: hops from UAV k to its nearest base station (-1: no path, eq. 8 broken);
+    `hears` (N, B + N): which stations, then which other UAVs, each UAV is in range of;
     `uav_links` (L, 2): UAV index pairs i < j in range; `station_links` (M, 2): (UAV, station).
     """
 
@@ -62,8 +65,32 @@ class Topology:
     uav_xy: np.ndarray  # (N, 2)
     range_m: float
     hops: np.ndarray  # (N,) int
-    uav_links: np.ndarray  # (L, 2) int
-    station_links: np.ndarray  # (M, 2) int
+    hears: np.ndarray  # (N, B + N) bool; the UAV block is symmetric, False on its diagonal
+
+    @property
+    def hears_station(self) -> np.ndarray:
+        """(N, B) bool: the stations each UAV is in range of."""
+        return self.hears[:, : len(self.stations)]
+
+    @property
+    def hears_uav(self) -> np.ndarray:
+        """(N, N) bool: the UAVs each UAV is in range of (not itself)."""
+        return self.hears[:, len(self.stations) :]
+
+    @cached_property
+    def hop_counts(self) -> list[int]:
+        """`hops` as a list (one packet's lookup, without numpy)."""
+        return self.hops.tolist()
+
+    @cached_property
+    def uav_links(self) -> np.ndarray:
+        """(L, 2) int: UAV index pairs i < j in range."""
+        return np.argwhere(np.triu(self.hears_uav, 1)).reshape(-1, 2)
+
+    @cached_property
+    def station_links(self) -> np.ndarray:
+        """(M, 2) int: (UAV, station) pairs in range."""
+        return np.argwhere(self.hears_station).reshape(-1, 2)
 
     @property
     def connected(self) -> bool:
@@ -77,17 +104,16 @@ class Topology:
         out = np.full(len(points), -1, dtype=int)
         if not len(points):
             return out
-        limit = _limit(self.range_m)
-        if len(self.stations):
-            direct = _squared(points, self.stations) <= limit
-            out[direct.any(axis=1)] = 1
+        station_count = len(self.stations)
+        # (M, B + N): the stations, then the UAVs, each ground node is in range of
+        hears = _squared(points, np.concatenate([self.stations, self.uav_xy])) <= _limit(
+            self.range_m
+        )
+        out[np.logical_or.reduce(hears[:, :station_count], axis=1)] = 1
         if len(self.uav_xy):
-            heard = _squared(points, self.uav_xy) <= limit  # (M, N)
-            relay = np.where(
-                heard & (self.hops >= 0)[None, :], self.hops[None, :], np.iinfo(int).max
-            )
-            best = relay.min(axis=1)
-            via = (out < 0) & (best < np.iinfo(int).max)
+            relay = np.where(hears[:, station_count:] & (self.hops >= 0), self.hops, _NO_RELAY)
+            best = np.minimum.reduce(relay, axis=1)
+            via = (out < 0) & (best < _NO_RELAY)
             out[via] = best[via] + 1
         return out
 
@@ -101,54 +127,100 @@ def _squared(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ijd,ijd->ij", gap, gap)
 
 
-def topology(stations: np.ndarray, uav_xy: np.ndarray, range_m: float) -> Topology:
+def topology(
+    stations: np.ndarray, uav_xy: np.ndarray, range_m: float, previous: Topology | None = None
+) -> Topology:
     """The unit-disk graph of base stations and UAVs (horizontal positions, (B, 2) and (N, 2));
-    hop counts by a breadth-first search from every station at once (vectorised)."""
-    stations = np.asarray(stations, dtype=float).reshape(-1, 2)
+    hop counts by a breadth-first search from every station at once (vectorised). When the
+    nodes in range are those of `previous` (the same stations and range a moment before: the
+    graph seldom changes between two positions of a fleet), its hop counts are kept."""
+    stations = np.asarray(stations, dtype=float)
+    if stations.ndim != 2 or stations.shape[1] != 2:
+        stations = stations.reshape(-1, 2)
     uav_xy = np.asarray(uav_xy, dtype=float).reshape(-1, 2)
-    count = len(uav_xy)
+    count, station_count = len(uav_xy), len(stations)
     limit = _limit(range_m)
-    known = np.isfinite(uav_xy).all(axis=1)
-    to_station = (_squared(uav_xy, stations) <= limit) & known[:, None]
-    between = (_squared(uav_xy, uav_xy) <= limit) & known[:, None] & known[None, :]
-    np.fill_diagonal(between, False)
-    hops = np.full(count, -1, dtype=int)
-    frontier = to_station.any(axis=1)
-    hops[frontier] = 1
-    reached = frontier.copy()
-    level = 1
-    while frontier.any():
-        level += 1
-        frontier = between[frontier].any(axis=0) & ~reached
-        reached |= frontier
-        hops[frontier] = level
-    upper = np.argwhere(np.triu(between, 1))
+    # one (N, B + N) table of squared distances: UAVs to stations, then to UAVs
+    hears = _squared(uav_xy, np.concatenate([stations, uav_xy])) <= limit
+    if math.isinf(limit):  # (a finite range already hears nothing at an unknown position)
+        known = np.isfinite(uav_xy).all(axis=1)
+        hears &= known[:, None]
+        hears[:, station_count:] &= known[None, :]
+    between = hears[:, station_count:]
+    between.flat[:: count + 1] = False  # the diagonal
+    if (
+        previous is not None
+        and previous.hears.shape == hears.shape
+        and previous.range_m == range_m
+        and (previous.stations is stations or np.array_equal(previous.stations, stations))
+        and not np.count_nonzero(previous.hears != hears)
+    ):
+        hops = previous.hops
+    else:
+        hops = _hops(hears[:, :station_count], between)
     return Topology(
-        stations=stations,
-        uav_xy=uav_xy,
-        range_m=float(range_m),
-        hops=hops,
-        uav_links=upper.reshape(-1, 2),
-        station_links=np.argwhere(to_station).reshape(-1, 2),
+        stations=stations, uav_xy=uav_xy, range_m=float(range_m), hops=hops, hears=hears
     )
 
 
+def _hops(to_station: np.ndarray, between: np.ndarray) -> np.ndarray:
+    """Hops of each UAV to its nearest station (-1: none): breadth-first search from every
+    station at once over the UAVs in range of each other."""
+    hops = np.full(len(between), -1, dtype=int)
+    frontier = np.logical_or.reduce(to_station, axis=1)
+    hops[frontier] = 1
+    reached = frontier.copy()
+    level = 1
+    while np.count_nonzero(frontier):
+        level += 1
+        frontier = np.logical_or.reduce(between[frontier], axis=0)
+        frontier &= ~reached
+        reached |= frontier
+        hops[frontier] = level
+    return hops
+
+
 class Channel:
-    """Draws each packet's fate over its hops: delay (s) or lost (None). Seeded."""
+    """Draws each packet's fate over its hops: delay (s) or lost (None). Seeded.
+
+    The draws are numpy's (`Generator.random`, and `Generator.uniform` = low + (high - low) x
+    a `random` draw) taken from one stream in the same order, a block at a time: a packet costs
+    a few float operations instead of a numpy call per packet."""
+
+    _BLOCK = 4096  # uniform draws fetched from the generator at once
 
     def __init__(self, config: RadioConfig, stream: int = 0) -> None:
         self.config = config
         self._rng = np.random.default_rng([config.seed, stream])
+        self._block: list[float] = []
+        self._next = 0  # index in `_block` of the next draw
+
+    def _draws(self, count: int) -> list[float]:
+        """The next `count` uniform draws in [0, 1) of the stream."""
+        start, end = self._next, self._next + count
+        if end > len(self._block):
+            rest = self._block[start:]
+            more = max(self._BLOCK, count - len(rest))
+            self._block = rest + self._rng.random(more).tolist()
+            start, end = 0, count
+        self._next = end
+        return self._block[start:end]
 
     def transit(self, hops: int) -> float | None:
         """Delay of one packet over `hops` hops (> 0), or None if a hop lost it."""
         cfg = self.config
-        if cfg.loss > 0 and self._rng.random() >= (1.0 - cfg.loss) ** hops:
+        if cfg.loss > 0 and self._draws(1)[0] >= (1.0 - cfg.loss) ** hops:
             return None
         if cfg.jitter_s == 0:
             return hops * cfg.hop_latency_s
-        draws = self._rng.uniform(-cfg.jitter_s, cfg.jitter_s, hops)
-        return float(np.maximum(cfg.hop_latency_s + draws, 0.0).sum())
+        low, span, latency = -cfg.jitter_s, cfg.jitter_s - -cfg.jitter_s, cfg.hop_latency_s
+        per_hop = [max(latency + (low + span * u), 0.0) for u in self._draws(hops)]
+        if hops >= 8:  # numpy's pairwise summation order, as the delays always were summed
+            return float(np.sum(np.array(per_hop)))
+        total = 0.0
+        for delay in per_hop:
+            total += delay
+        return total
 
     def transit_many(self, hops: np.ndarray) -> np.ndarray:
         """Delays (s) of packets over `hops` (M,) hops each (> 0); NaN where a hop lost it."""
@@ -159,12 +231,13 @@ class Channel:
         most = int(hops.max())
         per_hop = np.full((len(hops), most), cfg.hop_latency_s)
         if cfg.jitter_s > 0:
-            per_hop += self._rng.uniform(-cfg.jitter_s, cfg.jitter_s, per_hop.shape)
+            draws = np.array(self._draws(per_hop.size)).reshape(per_hop.shape)
+            per_hop += -cfg.jitter_s + (cfg.jitter_s - -cfg.jitter_s) * draws
             np.maximum(per_hop, 0.0, out=per_hop)
         per_hop[np.arange(most)[None, :] >= hops[:, None]] = 0.0
         delays = per_hop.sum(axis=1)
         if cfg.loss > 0:
-            lost = self._rng.random(len(hops)) >= (1.0 - cfg.loss) ** hops
+            lost = np.array(self._draws(len(hops))) >= (1.0 - cfg.loss) ** hops
             delays[lost] = np.nan
         return delays
 

@@ -11,6 +11,7 @@ sent, or when a hop loses it.
 
 from __future__ import annotations
 
+import math
 from array import array
 from dataclasses import dataclass, field
 
@@ -74,9 +75,10 @@ class RadioStats:
         hops (-1: no path); `delay_s` None = dropped."""
         counter = self.counters[kind]
         counter.sent += 1
-        group = "ground" if kind == "ground" else "fleet"
-        per = self.per_uav[kind][node] if kind != "ground" else None
-        if per is not None:
+        if kind == "ground":
+            per, group = None, "ground"
+        else:
+            per, group = self.per_uav[kind][node], "fleet"
             per.sent += 1
         if delay_s is None:
             counter.dropped += 1
@@ -88,12 +90,13 @@ class RadioStats:
                 per.received += 1
             self._delays[group].append(delay_s)
             self._hops[group].append(hops)
-        if self.log is not None:
-            self.log.time_s.append(t)
-            self.log.kind.append(_KIND_CODE[kind])
-            self.log.node.append(node)
-            self.log.hops.append(hops)
-            self.log.delay_s.append(np.nan if delay_s is None else delay_s)
+        log = self.log
+        if log is not None:
+            log.time_s.append(t)
+            log.kind.append(_KIND_CODE[kind])
+            log.node.append(node)
+            log.hops.append(hops)
+            log.delay_s.append(math.nan if delay_s is None else delay_s)
 
     def packets(
         self, kind: str, nodes: np.ndarray, t: np.ndarray, hops: np.ndarray, delays: np.ndarray

@@ -55,22 +55,28 @@ def _chunk_metrics(positions: np.ndarray, base_stations: np.ndarray, radio_range
 
     Hops: breadth-first search run on all samples at once; the frontier (T, N) grows through
     the UAV-UAV adjacency (T, N, N) until no sample gains a UAV. -1 = no path to a station.
+    (A run checks one sample per tick: the reductions are numpy's ufunc reductions, without
+    the Python layer of `ndarray.any` and `min`.)
     """
     samples, count = positions.shape[:2]
     limit = (radio_range + DISTANCE_TOLERANCE) ** 2
     to_base = positions[:, :, None, :] - base_stations[None, None, :, :]
-    frontier = (np.einsum("tnbd,tnbd->tnb", to_base, to_base) <= limit).any(axis=2)
+    frontier = np.logical_or.reduce(np.einsum("tnbd,tnbd->tnb", to_base, to_base) <= limit, axis=2)
     hops = np.where(frontier, 1, -1)
     between = positions[:, :, None, :] - positions[:, None, :, :]
     squared = np.einsum("tijd,tijd->tij", between, between)
-    adjacency = (squared <= limit).astype(np.float32)
-    squared[:, np.arange(count), np.arange(count)] = np.inf
-    closest = np.sqrt(squared.min(axis=(1, 2))) if count > 1 else np.full(samples, np.inf)
+    adjacency = squared <= limit
+    if count > 1:
+        flat = squared.reshape(samples, count * count)
+        flat[:, :: count + 1] = np.inf  # the diagonal
+        closest = np.sqrt(np.minimum.reduce(flat, axis=1))
+    else:
+        closest = np.full(samples, np.inf)
     reached = frontier.copy()
     level = 1
-    while frontier.any():
+    while np.count_nonzero(frontier):
         level += 1
-        heard = (adjacency @ frontier.astype(np.float32)[..., None])[..., 0] > 0
+        heard = np.logical_or.reduce(adjacency & frontier[:, None, :], axis=2)
         frontier = heard & ~reached
         reached |= frontier
         hops[frontier] = level
@@ -104,12 +110,15 @@ def check_positions(
     else:
         to_obstacles = np.full(samples, np.inf)
 
-    closest = np.full(samples, np.inf)
-    hops = np.full((samples, count), -1, dtype=int)
     step = max(1, _CHUNK_CELLS // max(1, count * (count + len(stations))))
-    for start in range(0, samples, step):
-        chunk = slice(start, start + step)
-        closest[chunk], hops[chunk] = _chunk_metrics(positions[chunk], stations, radio_range)
+    if samples <= step:
+        closest, hops = _chunk_metrics(positions, stations, radio_range)
+    else:
+        closest = np.full(samples, np.inf)
+        hops = np.full((samples, count), -1, dtype=int)
+        for start in range(0, samples, step):
+            chunk = slice(start, start + step)
+            closest[chunk], hops[chunk] = _chunk_metrics(positions[chunk], stations, radio_range)
     connected = (hops >= 0).all(axis=1)
     max_hops = np.where(connected, hops.max(axis=1, initial=0), -1)
     return GuaranteeSamples(

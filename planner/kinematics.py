@@ -153,8 +153,7 @@ class SpeedProfile:
 
     def _stretch(self, t: np.ndarray) -> np.ndarray:
         """Index of the stretch holding time t (stretch 0 for t < 0)."""
-        index = np.searchsorted(self.times, t, side="right") - 1
-        return np.clip(index, 0, len(self.times) - 1)
+        return np.maximum(self.times.searchsorted(t, side="right") - 1, 0)
 
     def speed_at(self, t) -> np.ndarray:
         """v(t), right-continuous; 0 before the mission start."""
@@ -191,7 +190,7 @@ class SpeedProfile:
         s < 0 it is 0; for a distance never reached (final speed 0) it is +inf.
         """
         s = np.asarray(s, dtype=float)
-        i = np.clip(np.searchsorted(self._starts, s, side="right") - 1, 0, None)
+        i = np.maximum(self._starts.searchsorted(s, side="right") - 1, 0)
         speed = self.speeds[i]
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(speed > 0, self.times[i] + (s - self._starts[i]) / speed, np.inf)
@@ -270,6 +269,22 @@ class LineFormation:
         object.__setattr__(self, "_phase_directions", _readonly(phase_directions))
         object.__setattr__(self, "_jumps", _readonly(jumps))
         object.__setattr__(self, "_prefix_l", _readonly(prefix_l))
+        # what the per-tick evaluations use, computed once
+        object.__setattr__(self, "_rank_spacing_r", _readonly(rank * spacing_r))
+        object.__setattr__(self, "_lowest_beyond", _readonly(-rank * spacing_c))
+        behind = fleet_size - 1 - rank
+        highest = float(cumulative[-1]) + behind * spacing_c
+        object.__setattr__(self, "_highest_beyond", _readonly(highest))
+        object.__setattr__(self, "_departures", _readonly(thresholds[:, 0].copy()))
+        object.__setattr__(self, "_arrivals", _readonly(thresholds[:, -1].copy()))
+        # the pieces of the path extended by both rows: start point, arc length at it
+        starts = np.concatenate([path[:1], path[:-1], path[-1:]])
+        arcs = np.concatenate([[0.0], cumulative[:-1], cumulative[-1:]])
+        object.__setattr__(self, "_piece_starts", _readonly(starts))
+        object.__setattr__(self, "_piece_arcs", _readonly(arcs))
+        start_slots = path[0] - (rank * spacing_c)[:, None] * directions[0]
+        object.__setattr__(self, "_start_slots", _readonly(start_slots))
+        object.__setattr__(self, "_crossing_cache", None)  # (profile, prefix sums), see below
 
     # ----- geometry -------------------------------------------------------------------------
 
@@ -306,7 +321,7 @@ class LineFormation:
     @property
     def start_slots(self) -> np.ndarray:
         """(N, 2): P_0,n = A - (n-1) dS_c e_0 (eqs. 17, 27)."""
-        return self.path[0] - (self._rank * self._spacing_c)[:, None] * self._directions[0]
+        return self._start_slots.copy()
 
     @property
     def goal_slots(self) -> np.ndarray:
@@ -332,11 +347,8 @@ class LineFormation:
         Negative on the start row, above len(P) on the goal row.
         """
         s = np.asarray(distance, dtype=float)[..., None]
-        behind = self.fleet_size - 1 - self._rank
-        return np.clip(
-            s - self._rank * self._spacing_r,
-            -self._rank * self._spacing_c,
-            self.path_length + behind * self._spacing_c,
+        return np.minimum(
+            np.maximum(s - self._rank_spacing_r, self._lowest_beyond), self._highest_beyond
         )
 
     def positions(self, distance) -> np.ndarray:
@@ -362,32 +374,28 @@ class LineFormation:
         return float(profile.time_at_distance(self.total_distance))
 
     def _point_at(self, beyond: np.ndarray) -> np.ndarray:
-        """Point at arc length `beyond` from A on the path extended by both rows."""
-        cumulative = self._cumulative
-        segment = np.clip(
-            np.searchsorted(cumulative, beyond, side="right") - 1, 0, len(cumulative) - 2
-        )
-        along = (beyond - cumulative[segment])[..., None]
-        on_path = self.path[segment] + along * self._directions[1:-1][segment]
-        start_row = self.path[0] + beyond[..., None] * self._directions[0]
-        goal_row = self.path[-1] + (beyond - self.path_length)[..., None] * self._directions[-1]
-        return np.where(
-            (beyond < 0)[..., None],
-            start_row,
-            np.where((beyond > self.path_length)[..., None], goal_row, on_path),
-        )
+        """Point at arc length `beyond` from A on the path extended by both rows.
+
+        Piece j of the extended path starts at `_piece_starts[j]` (arc length `_piece_arcs[j]`)
+        and runs along `_directions[j]`: j = 0 the start row (before A), 1 .. K-1 the path's
+        segments (the last one up to B included), K the goal row (beyond B)."""
+        count = len(self._cumulative)
+        piece = np.minimum(self._cumulative.searchsorted(beyond, side="right"), count - 1)
+        piece = np.where(beyond > self._cumulative[-1], count, piece)
+        along = (beyond - self._piece_arcs[piece])[..., None]
+        return self._piece_starts[piece] + along * self._directions[piece]
 
     def _passed(self, distance, strict: bool) -> np.ndarray:
         """S.shape + (N,): how many thresholds L_{k,n} are below S (strict) or <= S."""
         s = np.asarray(distance, dtype=float)[..., None]
         side = "left" if strict else "right"
         below = np.less if strict else np.less_equal
-        on_path = np.searchsorted(self._cumulative, s - self._rank * self._spacing_r, side=side)
-        departed = below(self._thresholds[:, 0], s)
-        arrived = below(self._thresholds[:, -1], s)
+        on_path = self._cumulative.searchsorted(s - self._rank_spacing_r, side=side)
+        departed = below(self._departures, s)
+        arrived = below(self._arrivals, s)
         # Keep the three comparisons consistent where rounding splits coincident thresholds.
-        on_path = np.where(arrived, len(self._cumulative), np.where(departed, on_path, 0))
-        return departed.astype(int) + on_path + arrived.astype(int)
+        on_path = np.where(arrived, len(self._cumulative), on_path * departed)
+        return on_path + departed + arrived
 
     def _kinks(self) -> tuple[np.ndarray, np.ndarray]:
         """Kinks of V_n(S): positions (N, K+2) = thresholds and unit-speed velocity jumps.
@@ -422,14 +430,13 @@ class Reference:
     accelerations: np.ndarray
 
 
-def _antiderivative(formation: LineFormation, profile: SpeedProfile, times: np.ndarray):
-    """Integral of V_n - P_0,n from -inf to t, (T, N, 2), exact.
-
-    V_n(t) = P_0,n + sum_k jump_k max(S(t) - L_k,n, 0) with jump_k = e_k - e_{k-1} (eq. 27
-    regrouped), and the integral of max(S - L, 0) up to t is J(t) - L t - (J(phi) - L phi)
-    once t > phi = Phi(L), with J the integral of S. The set of passed thresholds is a prefix,
-    so the sums over k are prefix sums gathered at the count of passed thresholds.
-    """
+def _crossing_prefix(formation: LineFormation, profile: SpeedProfile) -> np.ndarray:
+    """(N, K+3, 2): prefix sums over the thresholds of jump_k (J(phi) - L phi), phi = Phi(L),
+    for `_antiderivative`. They depend on the profile only, which changes on a speed change:
+    the formation keeps the last profile's (the fast and live loops evaluate every tick)."""
+    cached = formation._crossing_cache
+    if cached is not None and cached[0] is profile:
+        return cached[1]
     thresholds = formation._thresholds
     crossing = profile.time_at_distance(thresholds)  # (N, K+2)
     finite = np.isfinite(crossing)
@@ -444,7 +451,22 @@ def _antiderivative(formation: LineFormation, profile: SpeedProfile, times: np.n
         ],
         axis=1,
     )
-    passed = formation._passed(profile.distance(times), strict=True)  # (T, N)
+    object.__setattr__(formation, "_crossing_cache", (profile, _readonly(prefix_a)))
+    return prefix_a
+
+
+def _antiderivative(
+    formation: LineFormation, profile: SpeedProfile, times: np.ndarray, distance: np.ndarray
+):
+    """Integral of V_n - P_0,n from -inf to t, (T, N, 2), exact; `distance` is S(times).
+
+    V_n(t) = P_0,n + sum_k jump_k max(S(t) - L_k,n, 0) with jump_k = e_k - e_{k-1} (eq. 27
+    regrouped), and the integral of max(S - L, 0) up to t is J(t) - L t - (J(phi) - L phi)
+    once t > phi = Phi(L), with J the integral of S. The set of passed thresholds is a prefix,
+    so the sums over k are prefix sums gathered at the count of passed thresholds.
+    """
+    prefix_a = _crossing_prefix(formation, profile)
+    passed = formation._passed(distance, strict=True)  # (T, N)
     uav = np.arange(formation.fleet_size)
     integral = profile.distance_integral(times)[:, None, None]
     return (
@@ -454,9 +476,10 @@ def _antiderivative(formation: LineFormation, profile: SpeedProfile, times: np.n
     )
 
 
-def _velocity(formation: LineFormation, profile: SpeedProfile, times: np.ndarray) -> np.ndarray:
-    """dV_n/dt (right derivative), (T, N, 2)."""
-    distance = profile.distance(times)
+def _velocity(
+    formation: LineFormation, profile: SpeedProfile, times: np.ndarray, distance: np.ndarray
+) -> np.ndarray:
+    """dV_n/dt (right derivative), (T, N, 2); `distance` is S(times)."""
     return profile.speed_at(times)[:, None, None] * formation.directions(distance)
 
 
@@ -474,16 +497,18 @@ def smoothed_reference(
         raise ValueError(f"window_s must be finite and >= 0, not {window_s}")
     times = np.asarray(times, dtype=float).reshape(-1)
     if window_s == 0:
-        positions = formation.positions(profile.distance(times))
-        velocities = _velocity(formation, profile, times)
+        distance = profile.distance(times)
+        positions = formation.positions(distance)
+        velocities = _velocity(formation, profile, times, distance)
         return Reference(positions, velocities, np.zeros_like(velocities))
     # Both window ends in one evaluation: [late..., early...].
     ends = np.concatenate([times + window_s / 2, times - window_s / 2])
     count = len(times)
-    integral = _antiderivative(formation, profile, ends)
-    virtual = formation.positions(profile.distance(ends))
-    velocity = _velocity(formation, profile, ends)
-    positions = formation.start_slots[None] + (integral[:count] - integral[count:]) / window_s
+    distance = profile.distance(ends)
+    integral = _antiderivative(formation, profile, ends, distance)
+    virtual = formation.positions(distance)
+    velocity = _velocity(formation, profile, ends, distance)
+    positions = formation._start_slots[None] + (integral[:count] - integral[count:]) / window_s
     velocities = (virtual[:count] - virtual[count:]) / window_s
     accelerations = (velocity[:count] - velocity[count:]) / window_s
     return Reference(positions, velocities, accelerations)

@@ -105,6 +105,31 @@ def test_the_channel_is_seeded():
     np.testing.assert_array_equal(draws[0], draws[1])
 
 
+def test_the_channel_draws_what_one_numpy_call_per_packet_draws():
+    """The channel takes its draws a block at a time; each packet's fate is still the one
+    numpy's generator gives packet by packet (`random` for the loss, `uniform` per hop), so
+    seeded runs keep their delays."""
+    config = RadioConfig(100.0, hop_latency_s=0.002, jitter_s=0.001, loss=0.1, seed=11)
+    channel = Channel(config)
+    rng = np.random.default_rng([config.seed, 0])
+    hop_counts = np.random.default_rng(1).integers(1, 12, 3000)
+    for k, hops in enumerate(hop_counts.tolist()):
+        if k % 500 == 499:  # the ground users' batches share the stream
+            batch = hop_counts[k : k + 7]
+            per_hop = np.full((len(batch), batch.max()), config.hop_latency_s)
+            per_hop += rng.uniform(-config.jitter_s, config.jitter_s, per_hop.shape)
+            np.maximum(per_hop, 0.0, out=per_hop)
+            per_hop[np.arange(batch.max())[None, :] >= batch[:, None]] = 0.0
+            expected = per_hop.sum(axis=1)
+            expected[rng.random(len(batch)) >= (1.0 - config.loss) ** batch] = np.nan
+            np.testing.assert_array_equal(channel.transit_many(batch), expected)
+        if rng.random() >= (1.0 - config.loss) ** hops:
+            assert channel.transit(hops) is None
+            continue
+        draws = rng.uniform(-config.jitter_s, config.jitter_s, hops)
+        assert channel.transit(hops) == float(np.maximum(config.hop_latency_s + draws, 0.0).sum())
+
+
 def test_a_stream_is_delivered_in_order_even_when_a_later_packet_is_faster():
     line = DelayLine()
     assert line.put("a", 0.010, "a1") == 0.010

@@ -3,7 +3,8 @@
 The simulation's local frame is ENU metres (x east, y north, z up) anchored at a geodetic
 origin (the ``--home`` of ``vehicles sim``); MAVLink local frames are NED. Altitudes are metres
 above the WGS84 ellipsoid as pymap3d computes them; the vehicles report them as AMSL (a flat
-simulated world has no geoid).
+simulated world has no geoid). ENU -> WGS84 is the ground station's conversion too
+(`fleetwire.geodesy`: pymap3d's closed form without its per-call overhead).
 """
 
 from __future__ import annotations
@@ -12,8 +13,9 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-import pymap3d
 from pymap3d.ecef import geodetic2ecef, uvw2enu
+
+from fleetwire.geodesy import EnuFrame
 
 
 @dataclass(frozen=True)
@@ -27,10 +29,11 @@ class GeodeticOrigin:
     def to_geodetic(self, enu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(N, 3) local ENU -> latitude deg, longitude deg, altitude m arrays."""
         enu = np.asarray(enu, dtype=float).reshape(-1, 3)
-        lat, lon, alt = pymap3d.enu2geodetic(
-            enu[:, 0], enu[:, 1], enu[:, 2], self.latitude_deg, self.longitude_deg, self.altitude_m
-        )
-        return np.asarray(lat), np.asarray(lon), np.asarray(alt)
+        return self._frame.to_geodetic(enu[:, 0], enu[:, 1], enu[:, 2])
+
+    @cached_property
+    def _frame(self) -> EnuFrame:
+        return EnuFrame(self.latitude_deg, self.longitude_deg, self.altitude_m)
 
     @cached_property
     def _ecef(self) -> tuple[float, float, float]:

@@ -272,6 +272,7 @@ class _LockstepMission:
     # ------------------------------------------------------------------ the loop
     def run(self) -> FastRun:
         fleet, station, faults = self.fleet, self.station, self.options.faults
+        stalls = bool(faults.gcs_stalls)  # (most runs have none: no test per iteration)
         tick_period = 1.0 / station.options.setpoint_rate_hz
         next_tick = 0.0
         next_sample = 0.0
@@ -283,7 +284,7 @@ class _LockstepMission:
             self.medium.observe_all(fleet.true_xy(), sim_s)
             self._deliver(sim_s)
             vehicle_t = sim_s - self.sim_zero
-            if not (connected and faults.stalled(vehicle_t)):
+            if not (connected and stalls and faults.stalled(vehicle_t)):
                 station.receive(sim_s, self._batches(sim_s))
                 while operator and vehicle_t >= operator[0][0]:
                     _, speed, at = operator.pop(0)
@@ -303,7 +304,7 @@ class _LockstepMission:
                             connected = True
                             self.sim_zero = self.clock.wall_at(0.0)
                 self._send_down(sim_s)
-            if connected and not faults.stalled(vehicle_t):  # the recording is the GCS's
+            if connected and not (stalls and faults.stalled(vehicle_t)):  # the GCS records
                 if sim_s >= next_sample - 1e-9:
                     self._sample(sim_s)
                     next_sample = sim_s + self.options.sample_period_s
@@ -344,6 +345,8 @@ class _LockstepMission:
     def _send_down(self, sim_s: float) -> None:
         """What the drivers sent, into the medium."""
         for index, link in enumerate(self.links):
+            if not link.outbox:
+                continue
             for message in link.outbox:
                 _, delay = self.medium.route("downlink", index, sim_s)
                 if delay is not None and not self._cut(index, sim_s):
@@ -351,7 +354,8 @@ class _LockstepMission:
             link.outbox.clear()
 
     def _cut(self, index: int, sim_s: float) -> bool:
-        return self.options.faults.cut(index + 1, sim_s - self.sim_zero)
+        faults = self.options.faults
+        return bool(faults.link_cuts) and faults.cut(index + 1, sim_s - self.sim_zero)
 
     # ------------------------------------------------------------------ speed-change timing
     def _on_received_by_uav(self, index: int, message, due_sim_s: float) -> None:

@@ -218,7 +218,11 @@ class _NoView:
 
 class Recorder(Protocol):
     """What the core records, as typed records (`gcs.flight.records`); `wall` is the loop's
-    time of the thing recorded (gcs.logs.recording.FlightRecorder implements it)."""
+    time of the thing recorded (gcs.logs.recording.FlightRecorder implements it).
+    `keeps_samples` False: the per-UAV setpoint and state records would be thrown away, so the
+    core does not build them (the fast mode's `NullRecorder`: 60 k records a mission)."""
+
+    keeps_samples: bool
 
     def setpoint(self, record: SetpointRecord, wall: float) -> None: ...
 
@@ -255,6 +259,8 @@ class _Evaluation:
 
 class NullRecorder:
     """Records nothing (the fast mode keeps its own time series)."""
+
+    keeps_samples = False
 
     def setpoint(self, record: SetpointRecord, wall: float) -> None:
         return None
@@ -893,9 +899,12 @@ class GroundStation:
         # Python lists once per tick: the per-UAV loop below is the hot path.
         positions, velocities = position.tolist(), velocity.tolist()
         accelerations, virtuals, geo = acceleration.tolist(), virtual.tolist(), geodetic.tolist()
+        keep = self.recorder.keeps_samples
         for k, index in enumerate(streaming):
             driver = self.drivers[index]
             driver.send_setpoint(positions[k], velocities[k], accelerations[k], t, now, geo[k])
+            if not keep:
+                continue
             lat, lon, alt = geo[k]
             self.recorder.setpoint(
                 SetpointRecord(
@@ -970,7 +979,7 @@ class GroundStation:
             self.tracking_now[uavs] = errors
             if not self.aborting:  # landing where they are: V_n no longer applies
                 events += self.safety.tracking(t, uavs, errors, control)
-            for k, index in enumerate(uavs.tolist()):
+            for k, index in enumerate(uavs.tolist() if self.recorder.keeps_samples else ()):
                 driver = self.drivers[index]
                 tel = driver.telemetry
                 # the position of this sample (the one its tracking error is computed from);

@@ -251,6 +251,9 @@ class FlightRecorder:
     recorder's context, `write(channel, payload, wall)` logs with the shared time base.
     """
 
+    #: Every setpoint and position sample is recorded (`gcs.flight.core.Recorder`).
+    keeps_samples = True
+
     def __init__(
         self,
         path: Path,

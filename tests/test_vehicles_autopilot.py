@@ -252,7 +252,8 @@ def test_any_setpoint_is_followed_or_refused_and_the_state_stays_finite(
 def test_setpoint_refusals_name_the_reason():
     bench = Bench()
     bench.fly()
-    bench.local_setpoint(mask=0b111000111 ^ 0b1)  # ignores y and z position but not x
+    bench.local_setpoint(mask=0b110000111000)  # position and acceleration, no velocity
+    bench.local_setpoint(mask=0b110000000000 | 512)  # force with acceleration
     bench.local_setpoint(frame=mavlink.MAV_FRAME_BODY_FRD)
     bench.send(
         mavlink.MAVLink_set_position_target_global_int_message(
@@ -264,7 +265,8 @@ def test_setpoint_refusals_name_the_reason():
     bench.local_setpoint(mask=3072, afx=1e4)
     texts = " | ".join(bench.texts())
     for reason in (
-        "ignores only some axes",
+        "position and acceleration need velocity",
+        "force setpoints not supported",
         "frame 12 not supported",
         "terrain frame 11",
         "not finite",

@@ -12,8 +12,8 @@ from fleetwire.modes import COPTER_MODE
 from vehicles.testing import GroundStation, VehicleProcess, local_of
 
 SPEEDUP = 5.0
-GUIDED, LOITER, LAND, STABILIZE = (
-    COPTER_MODE[m] for m in ("GUIDED", "LOITER", "LAND", "STABILIZE")
+GUIDED, LOITER, LAND, STABILIZE, RTL = (
+    COPTER_MODE[m] for m in ("GUIDED", "LOITER", "LAND", "STABILIZE", "RTL")
 )
 UNKNOWN_COMMAND = 12345
 
@@ -89,8 +89,8 @@ def test_do_set_mode_is_acknowledged_and_set_mode_is_not(gcs: GroundStation):
     assert gcs.heartbeat_is(custom_mode=LOITER)
 
 
-def test_arming_is_refused_outside_guided_and_loiter_with_a_reason(gcs: GroundStation):
-    for mode in (STABILIZE, LAND):
+def test_arming_is_refused_outside_stabilize_guided_and_loiter_with_a_reason(gcs: GroundStation):
+    for mode in (LAND, RTL):
         assert gcs.set_mode(mode) == mavlink.MAV_RESULT_ACCEPTED
         texts = len(gcs.texts)
         assert gcs.arm() == mavlink.MAV_RESULT_FAILED
@@ -98,6 +98,9 @@ def test_arming_is_refused_outside_guided_and_loiter_with_a_reason(gcs: GroundSt
         assert refusal and refusal.severity == mavlink.MAV_SEVERITY_CRITICAL
     barrier(gcs)
     assert gcs.heartbeat_is(armed=False)
+    assert gcs.set_mode(STABILIZE) == mavlink.MAV_RESULT_ACCEPTED  # ArduCopter arms in it
+    assert gcs.arm() == mavlink.MAV_RESULT_ACCEPTED
+    gcs.wait_for(lambda: gcs.heartbeat_is(custom_mode=STABILIZE, armed=True), 5.0, "armed")
 
 
 def test_arm_and_disarm_on_the_ground(gcs: GroundStation):

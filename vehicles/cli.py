@@ -270,7 +270,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--setpoint-timeout",
         type=_positive("--setpoint-timeout"),
         default=1.0,
-        help="GUIDED: hold after this (s, 1)",
+        help="GUID_TIMEOUT: velocity/acceleration targets stop after this (s, 1; ArduCopter 3)",
     )
     add(
         "--gcs-timeout",

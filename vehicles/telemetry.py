@@ -20,6 +20,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from fleetwire.messages import MISSION_TIME_NAME, encode_mission_time
+from fleetwire.modes import COPTER_MODE
 from vehicles.dynamics import GRAVITY_MPS2, FleetDynamics
 from vehicles.frames import GeodeticOrigin
 
@@ -27,6 +28,7 @@ if TYPE_CHECKING:
     from vehicles.autopilot.status import AutopilotStatus
     from vehicles.autopilot.types import Stamp
 
+_AUTO = COPTER_MODE["AUTO"]
 MAX_MESSAGE_RATE_HZ = 50.0
 UINT16_MAX = 65535
 INT16_MAX = 32767
@@ -39,22 +41,22 @@ CAPABILITIES = (
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
 )
-SENSORS = (
-    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
-    | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
-    | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
-    | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-    | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-    | mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION
-    | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
-    | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
-    | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
-    | mavlink.MAV_SYS_STATUS_AHRS
-    | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
-    | mavlink.MAV_SYS_STATUS_PREARM_CHECK
+#: SYS_STATUS words of ArduCopter 4.7 SITL ready to fly (shared/sitl ardupilot-session.jsonl:
+#: present 0x5371fc2f, enabled 0x5361fc2f, health 0x4771fc2f, plus PREARM_CHECK when armable).
+ARDUCOPTER_SENSORS_PRESENT = 0x5371FC2F
+ARDUCOPTER_SENSORS_ENABLED = 0x5361FC2F
+ARDUCOPTER_SENSORS_HEALTH = 0x4771FC2F
+#: What the simulation has not (an RC receiver, a terrain database, on-board logging): not
+#: present nor enabled, and never unhealthy (health bits set, as ArduCopter sets PROXIMITY's).
+NOT_SIMULATED = (
+    mavlink.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
+    | mavlink.MAV_SYS_STATUS_TERRAIN
+    | mavlink.MAV_SYS_STATUS_LOGGING
 )
+#: The geofence is present but not enabled (FENCE_ENABLE 0) and healthy: nothing is breached.
+SENSORS_PRESENT = ARDUCOPTER_SENSORS_PRESENT & ~NOT_SIMULATED
+SENSORS_ENABLED = ARDUCOPTER_SENSORS_ENABLED & ~NOT_SIMULATED
+SENSORS_HEALTH = ARDUCOPTER_SENSORS_HEALTH & ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
 
 
 @dataclass(frozen=True)
@@ -64,7 +66,8 @@ class TelemetryRates:
     position_hz: float = 10.0  # GLOBAL_POSITION_INT, LOCAL_POSITION_NED
     attitude_hz: float = 10.0  # ATTITUDE
     truth_hz: float = 10.0  # SIM_STATE: the true (noise-free) state, for the GCS's metrics
-    status_hz: float = 1.0  # SYS_STATUS, BATTERY_STATUS, EXTENDED_SYS_STATE, VFR_HUD
+    status_hz: float = 1.0  # SYS_STATUS, BATTERY_STATUS, EXTENDED_SYS_STATE, VFR_HUD,
+    #                         MISSION_CURRENT
     home_hz: float = 0.2  # HOME_POSITION (also sent on arming and on request)
 
     def intervals(self) -> dict[int, float]:
@@ -83,6 +86,7 @@ class TelemetryRates:
             mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: every(self.status_hz),
             mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: every(self.status_hz),
             mavlink.MAVLINK_MSG_ID_VFR_HUD: every(self.status_hz),
+            mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: every(self.status_hz),
             mavlink.MAVLINK_MSG_ID_HOME_POSITION: every(self.home_hz),
             mavlink.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: 1.0,  # FLEET_SPD, once known
             mavlink.MAVLINK_MSG_ID_NAMED_VALUE_INT: 1.0,  # MSN_TIME, once synchronised
@@ -272,10 +276,12 @@ def sys_status(
     status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
 ) -> mavlink.MAVLink_message:
     battery = status.battery
-    health = SENSORS if status.prearm_ok else SENSORS & ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    health = SENSORS_HEALTH
+    if status.prearm_ok:
+        health |= mavlink.MAV_SYS_STATUS_PREARM_CHECK
     return mavlink.MAVLink_sys_status_message(
-        SENSORS,
-        SENSORS,
+        SENSORS_PRESENT,
+        SENSORS_ENABLED,
         health,
         0,
         _clamp_int(battery.voltage_v * 1000, 0, UINT16_MAX - 1),
@@ -546,6 +552,17 @@ def mission_time(
     )
 
 
+def mission_current(
+    status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
+) -> mavlink.MAVLink_message:
+    """MISSION_CURRENT (``GCS_MAVLINK::send_mission_current``): the navigation item AUTO is at,
+    the number of items without home, the mission's state and whether AUTO flies it."""
+    mode = (1 if status.mode == _AUTO else 2) if status.mission_count > 1 else 0
+    return mavlink.MAVLink_mission_current_message(
+        status.mission_nav, max(status.mission_count - 1, 0), status.mission_state, mode
+    )
+
+
 def autopilot_version(
     status: AutopilotStatus, snap: FleetSnapshot, stamp: Stamp
 ) -> mavlink.MAVLink_message:
@@ -595,4 +612,5 @@ BUILDERS: dict[int, Builder] = {
     mavlink.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: fleet_speed,
     mavlink.MAVLINK_MSG_ID_NAMED_VALUE_INT: mission_time,
     mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
+    mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: mission_current,
 }

@@ -1,14 +1,23 @@
 """COMMAND_LONG and COMMAND_INT: normalised to one :class:`Command`, dispatched to the handler of
-its MAV_CMD and acknowledged (COMMAND_ACK UNSUPPORTED for a command without one).
+its MAV_CMD and acknowledged (COMMAND_ACK UNSUPPORTED for a command without one, as ArduCopter
+answers a command it does not know; e.g. MAV_CMD_DO_CHANGE_ALTITUDE, which ArduCopter 4.7
+implements only in Plane).
 
-``MAV_CMD_DO_SET_MODE`` is acknowledged (``SET_MODE`` is not); arming is refused outside GUIDED
-and LOITER with ``Arm: ...`` and ACK FAILED; ``MAV_CMD_NAV_TAKEOFF`` needs GUIDED, armed and
-landed; every refusal carries a STATUSTEXT reason. A handler returns the MAV_RESULT to
-acknowledge, or -1 when it acknowledged itself (before the message it answers with).
+``MAV_CMD_DO_SET_MODE`` is acknowledged (``SET_MODE`` is not); arming is refused outside
+STABILIZE, GUIDED and LOITER with ``Arm: Mode not armable`` and ACK FAILED;
+``MAV_CMD_NAV_TAKEOFF`` needs GUIDED, armed and landed (COMMAND_INT: frame
+GLOBAL_RELATIVE_ALT); ``MAV_CMD_MISSION_START`` is :mod:`vehicles.autopilot.auto`'s;
+``MAV_CMD_CONDITION_YAW`` turns the vehicle in GUIDED, AUTO and RTL
+(``GCS_MAVLINK_Copter::handle_MAV_CMD_CONDITION_YAW``); ``MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN``
+param1 1 (or 3) reboots a disarmed vehicle after its ACK (``GCS_MAVLINK::handle_preflight_reboot``:
+FAILED while armed, UNSUPPORTED for other param1). Every refusal carries a STATUSTEXT reason. A
+handler returns the MAV_RESULT to acknowledge, or -1 when it acknowledged itself (before the
+message it answers with, or before rebooting).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -17,7 +26,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from fleetwire.messages import decode_speed_change
 from vehicles import telemetry
-from vehicles.autopilot import modes, setpoints, speed
+from vehicles.autopilot import auto, modes, setpoints, speed
 from vehicles.autopilot.setpoints import finite
 from vehicles.autopilot.types import Guided, Mode, Stamp
 from vehicles.telemetry import FleetSnapshot
@@ -132,7 +141,11 @@ def arm_disarm(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
 
 
 def takeoff(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
-    """MAV_CMD_NAV_TAKEOFF: climb to param7 m above home (GUIDED, armed, landed)."""
+    """MAV_CMD_NAV_TAKEOFF: climb to param7 m above home (GUIDED, armed, landed); it also
+    auto-arms the vehicle (``Mode::do_user_takeoff``)."""
+    if cmd.frame is not None and cmd.frame != mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT:
+        ap.status_text(mavlink.MAV_SEVERITY_WARNING, "Takeoff: frame must be GLOBAL_RELATIVE_ALT")
+        return mavlink.MAV_RESULT_DENIED
     altitude = cmd.params[6]
     if not finite(altitude) or not 0.0 < altitude <= ap.config.max_altitude_m:
         ap.status_text(
@@ -155,6 +168,7 @@ def takeoff(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
     ap.takeoff_target_z = point[2]
     ap.takeoff_started_s = stamp.sim_s
     ap.guided = Guided.TAKEOFF
+    ap.auto_armed = True
     ap.landed = False
     ap.landed_since = None
     ap.last_setpoint = None
@@ -164,14 +178,64 @@ def takeoff(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
     return mavlink.MAV_RESULT_ACCEPTED
 
 
-def land(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
-    modes.set_mode(ap, Mode.LAND, stamp)
+def _mode_command(ap: Autopilot, mode: Mode, stamp: Stamp) -> int:
+    """A command that is a mode change (ArduCopter: FAILED if the mode refuses)."""
+    accepted, reason = modes.set_mode(ap, mode, stamp)
+    if not accepted:
+        ap.status_text(mavlink.MAV_SEVERITY_WARNING, reason or "Mode change failed")
+        return mavlink.MAV_RESULT_FAILED
     return mavlink.MAV_RESULT_ACCEPTED
+
+
+def land(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
+    return _mode_command(ap, Mode.LAND, stamp)
 
 
 def return_to_launch(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
-    modes.set_mode(ap, Mode.RTL, stamp)
+    return _mode_command(ap, Mode.RTL, stamp)
+
+
+def loiter_unlimited(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
+    """MAV_CMD_NAV_LOITER_UNLIM: LOITER."""
+    return _mode_command(ap, Mode.LOITER, stamp)
+
+
+#: Modes whose yaw CONDITION_YAW sets (ArduCopter's ``auto_yaw`` users among ours).
+_AUTO_YAW_MODES = (Mode.GUIDED, Mode.AUTO, Mode.RTL)
+
+
+def condition_yaw(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
+    """MAV_CMD_CONDITION_YAW: param1 heading (deg, 0-360), param3 direction of a relative turn
+    (-1 counter-clockwise), param4 1 relative / 0 absolute. The turn rate is the airframe's
+    (param2 is not honoured). Accepted on the ground too, where it does nothing, as in
+    ArduCopter."""
+    angle, _, direction, relative = cmd.params[:4]
+    if not (finite(angle) and 0.0 <= angle <= 360.0 and relative in (0.0, 1.0)):
+        ap.status_text(
+            mavlink.MAV_SEVERITY_WARNING, "Yaw: param1 must be in [0, 360] deg, param4 0 or 1"
+        )
+        return mavlink.MAV_RESULT_FAILED
+    if ap.airborne() and ap.mode in _AUTO_YAW_MODES:
+        i = ap.index
+        heading = math.radians(angle)
+        if relative == 1.0:
+            heading = float(ap.dynamics.yaw[i]) + (-heading if direction < 0 else heading)
+        ap.dynamics.yaw_target[i] = heading % (2.0 * math.pi)
     return mavlink.MAV_RESULT_ACCEPTED
+
+
+def reboot(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
+    """MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: param1 1 (or 3, reboot to the bootloader, which in
+    simulation is a reboot) reboots a disarmed autopilot after the ACK."""
+    if ap.armed:
+        ap.status_text(mavlink.MAV_SEVERITY_WARNING, "Reboot: disarm first")
+        return mavlink.MAV_RESULT_FAILED
+    if cmd.params[0] not in (1.0, 3.0):
+        ap.status_text(mavlink.MAV_SEVERITY_WARNING, "Reboot: only param1 1 (reboot) is supported")
+        return mavlink.MAV_RESULT_UNSUPPORTED
+    ack(ap, cmd, mavlink.MAV_RESULT_ACCEPTED)
+    ap.reboot(stamp)
+    return -1
 
 
 def set_message_interval(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
@@ -265,4 +329,8 @@ COMMANDS: dict[int, Callable[[Autopilot, Command, Stamp], int]] = {
     mavlink.MAV_CMD_REQUEST_MESSAGE: request_message,
     mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: request_autopilot_capabilities,
     mavlink.MAV_CMD_DO_REPOSITION: reposition,
+    mavlink.MAV_CMD_MISSION_START: auto.mission_start,
+    mavlink.MAV_CMD_NAV_LOITER_UNLIM: loiter_unlimited,
+    mavlink.MAV_CMD_CONDITION_YAW: condition_yaw,
+    mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: reboot,
 }

@@ -6,8 +6,9 @@ The protocol modules are functions of the autopilot: :mod:`~vehicles.autopilot.m
 arming, ground state, landing), :mod:`~vehicles.autopilot.failsafes` (setpoint timeout, GCS
 failsafe), :mod:`~vehicles.autopilot.commands` (COMMAND_LONG / COMMAND_INT),
 :mod:`~vehicles.autopilot.setpoints` (SET_POSITION_TARGET_*), :mod:`~vehicles.autopilot.speed`
-(speed changes, mission clock, leader requests), :mod:`~vehicles.autopilot.parameters` and
-:mod:`~vehicles.autopilot.missions`.
+(speed changes, mission clock, leader requests), :mod:`~vehicles.autopilot.parameters`,
+:mod:`~vehicles.autopilot.missions` (the mission protocol), :mod:`~vehicles.autopilot.auto`
+(AUTO flying the mission) and :mod:`~vehicles.autopilot.ftp` (MAVFTP refused at once).
 """
 
 from __future__ import annotations
@@ -15,12 +16,15 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
+import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from vehicles import telemetry
 from vehicles.autopilot import (
+    auto,
     commands,
     failsafes,
+    ftp,
     missions,
     modes,
     parameters,
@@ -62,10 +66,13 @@ _HANDLERS: dict[str, Callable[[Autopilot, mavlink.MAVLink_message, Stamp], None]
     "PARAM_REQUEST_READ": parameters.on_param_request_read,
     "PARAM_SET": parameters.on_param_set,
     "MISSION_REQUEST_LIST": missions.on_mission_request_list,
+    "MISSION_REQUEST_INT": missions.on_mission_request_int,
+    "MISSION_REQUEST": missions.on_mission_request,
     "MISSION_COUNT": missions.on_mission_count,
     "MISSION_CLEAR_ALL": missions.on_mission_clear_all,
     "MISSION_ITEM_INT": missions.on_mission_item,
     "MISSION_ITEM": missions.on_mission_item,
+    "FILE_TRANSFER_PROTOCOL": ftp.on_file_transfer_protocol,
 }
 
 
@@ -90,24 +97,39 @@ class Autopilot:
     ) -> None:
         self.sysid = sysid
         self.index = index
+        self.count = count
         self.config = config
         self.dynamics = dynamics
         self.origin = origin
+        self.leader_requests = leader_requests
         self.outbox: list[mavlink.MAVLink_message] = []
+        self.comm_errors = 0
+        # the stored mission survives a reboot (missions.py); AUTO's progress in it does not
+        self.mission: tuple[missions.MissionItem, ...] = ()
+        self.mission_item_warned = False
+        self.mission_request_warned = False
+        self._refusal_last: dict[str, float] = {}
+        self._boot(0.0)
+
+    def _boot(self, now_s: float) -> None:
+        """The state of an autopilot that boots at simulated time ``now_s``: STABILIZE,
+        disarmed, on the ground, home and EKF origin where it stands, default telemetry."""
+        config, dynamics, index = self.config, self.dynamics, self.index
+        self.booted_at_s = now_s
         self.mode = Mode.STABILIZE
         self.armed = False
+        self.auto_armed = False  # AUTO may take off (Copter::update_auto_armed)
         self.landed = True
         self.guided = Guided.IDLE
         self.ekf_origin_enu = dynamics.position[index].copy()
         self.home_enu = dynamics.position[index].copy()
-        self.comm_errors = 0
         self.mission_clock = MissionClock()
         self.speeds = SpeedBook()
         self.leader = LeaderSchedule(
-            leader_requests, config.leader_retry_s, config.leader_max_tries
+            self.leader_requests, config.leader_retry_s, config.leader_max_tries
         )
         self.telemetry = TelemetrySchedule(
-            config.telemetry.intervals(), phase=telemetry.phase_of(index, count)
+            config.telemetry.intervals(), phase=telemetry.phase_of(index, self.count)
         )
         # failsafes
         self.gcs_failsafe: str | None = None  # None, "hold" or "land"
@@ -121,15 +143,31 @@ class Autopilot:
         self.takeoff_target_z = 0.0
         self.takeoff_started_s = 0.0
         self.rtl_phase = ""  # "climb", "return", "land"
+        # the mission: an upload in progress (missions.py), AUTO's progress (auto.py)
+        self.mission_upload: missions.Upload | None = None
+        self.mission_nav = 0  # the navigation item AUTO is at (0: none)
+        self.mission_running = False
+        self.mission_complete = False
+        self.auto_waiting = False  # AUTO was selected: start or resume at the next tick
+        self.auto_phase = ""  # "takeoff_wait", "takeoff", "wp", "land_approach", "land", "rtl"
+        self.auto_target: np.ndarray | None = None
+        self.nav_speed_mps = config.waypoint_speed_mps
+        self.wp_arrived_s: float | None = None
         # output
-        self._refusal_last: dict[str, float] = {}
         self._booted_announced = False
         self._reported_attitude: tuple[float, float, float, float] | None = None
+        dynamics.motors_on[index] = False
         modes.idle_on_ground(self)
+
+    def reboot(self, stamp: Stamp) -> None:
+        """MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN (disarmed): boot again from ``stamp``; the mission
+        and the parameters stay, the rest starts afresh (the link keeps its peer)."""
+        log.info("sysid %d: rebooting", self.sysid)
+        self._boot(stamp.sim_s)
 
     # ------------------------------------------------------------------ state ----------
     def booting(self, stamp: Stamp) -> bool:
-        return stamp.sim_s < self.config.boot_time_s
+        return stamp.sim_s - self.booted_at_s < self.config.boot_time_s
 
     def airborne(self) -> bool:
         return self.armed and not self.landed
@@ -144,10 +182,11 @@ class Autopilot:
         return AutopilotStatus(
             sysid=self.sysid,
             index=i,
-            booting=stamp.sim_s < self.config.boot_time_s,  # self.booting(stamp), inlined
+            booting=stamp.sim_s - self.booted_at_s < self.config.boot_time_s,  # self.booting()
             mode=self.mode,
             guided=self.guided,
             rtl_phase=self.rtl_phase,
+            auto_phase=self.auto_phase,
             armed=self.armed,
             landed=self.landed,
             gcs_failsafe=self.gcs_failsafe is not None,
@@ -160,6 +199,10 @@ class Autopilot:
             fleet_speed_mps=self.speeds.fleet_speed(stamp.sim_s, self.mission_clock),
             mission_time_s=self.mission_clock.now(stamp.sim_s),
             reported_attitude=self._reported_attitude,
+            mission_count=len(self.mission),
+            mission_nav=self.mission_nav,
+            mission_running=self.mission_running,
+            mission_complete=self.mission_complete,
         )
 
     # ------------------------------------------------------------------ output ---------
@@ -217,9 +260,13 @@ class Autopilot:
             self.status_text(mavlink.MAV_SEVERITY_INFO, "ArduPilot Ready")
             self.emit_due(_BOOT_MESSAGES, FleetSnapshot(self.dynamics, self.origin), stamp)
         modes.update_ground_state(self, stamp)
-        if self.armed and not self.landed:
+        if self.mode == Mode.AUTO:
+            auto.update(self, stamp)
+        elif self.armed and not self.landed:
             modes.update_mode(self, stamp)
             failsafes.update_setpoint_timeout(self, stamp)
+        if self.mission_upload is not None:
+            missions.update(self, stamp)
         failsafes.update_gcs_failsafe(self, stamp)
         if self.leader.active():
             speed.update_leader(self, stamp)

@@ -3,6 +3,12 @@ logic behind the commands), arming and disarming, take-off progress, RTL and lan
 contact and the automatic disarm, and the references each asks of the position controller
 (speed limits, hold a point, idle on the ground).
 
+Arming follows ArduCopter (``AP_Arming_Copter``, ``Mode::allows_arming``): in STABILIZE (the
+mode it boots in), GUIDED and LOITER; elsewhere ``Arm: Mode not armable``. Armed on the ground,
+nothing happens until a take-off (GUIDED ``MAV_CMD_NAV_TAKEOFF``, an AUTO mission started with
+``MAV_CMD_MISSION_START``), and after DISARM_DELAY it disarms by itself. AUTO's mission is
+:mod:`vehicles.autopilot.auto`'s.
+
 Functions of the :class:`~vehicles.autopilot.Autopilot` whose state they change; the facade
 calls :func:`update_ground_state` and :func:`update_mode` at every control tick.
 """
@@ -14,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from vehicles.autopilot import auto
 from vehicles.autopilot.types import ARMABLE_MODES, Guided, Mode, Stamp
 from vehicles.telemetry import FleetSnapshot
 
@@ -82,8 +89,16 @@ def set_mode(ap: Autopilot, mode: int, stamp: Stamp) -> tuple[bool, str | None]:
         return False, "Mode change failed: STABILIZE needs RC input"
     if mode == ap.mode:
         return True, None
+    if mode == Mode.AUTO and not auto.can_enter(ap):
+        return False, "Mode change to AUTO failed: init failed"  # Copter::mode_change_failed
+    if ap.mode == Mode.AUTO:
+        auto.leave(ap)
     ap.mode = mode
     ap.rtl_phase = ""
+    if mode == Mode.STABILIZE:
+        ap.auto_armed = False  # ArduCopter: manual throttle at zero
+    if mode == Mode.AUTO:
+        auto.enter(ap)
     if not ap.airborne():
         if mode == Mode.GUIDED:
             ap.guided = Guided.IDLE
@@ -93,17 +108,22 @@ def set_mode(ap: Autopilot, mode: int, stamp: Stamp) -> tuple[bool, str | None]:
         ap.guided = Guided.HOLD
         ap.last_setpoint = None
         hold_here(ap)
-    elif mode in (Mode.LOITER, Mode.BRAKE):
+    elif mode in (Mode.LOITER, Mode.BRAKE, Mode.AUTO):  # AUTO holds until its mission starts
         hold_here(ap)
     elif mode == Mode.LAND:
         start_landing(ap)
     elif mode == Mode.RTL:
-        ap.rtl_phase = "climb"
-        point = ap.dynamics.stopping_point(ap.index)
-        point[2] = max(point[2], ap.home_enu[2] + ap.config.rtl_altitude_m)
-        set_limits(ap)
-        ap.dynamics.hold(ap.index, point)
+        start_return(ap)
     return True, None
+
+
+def start_return(ap: Autopilot) -> None:
+    """RTL's first leg: climb (or stay) to RTL_ALT above home at the stopping point."""
+    ap.rtl_phase = "climb"
+    point = ap.dynamics.stopping_point(ap.index)
+    point[2] = max(point[2], ap.home_enu[2] + ap.config.rtl_altitude_m)
+    set_limits(ap)
+    ap.dynamics.hold(ap.index, point)
 
 
 def on_set_mode(ap: Autopilot, msg: mavlink.MAVLink_message, stamp: Stamp) -> None:
@@ -143,6 +163,7 @@ def disarm(ap: Autopilot, stamp: Stamp, reason: str = "Disarming motors") -> Non
     if not ap.armed:
         return
     ap.armed = False
+    ap.auto_armed = False
     ap.dynamics.motors_on[ap.index] = False
     ap.guided = Guided.IDLE
     ap.last_setpoint = None
@@ -170,12 +191,14 @@ def update_ground_state(ap: Autopilot, stamp: Stamp) -> None:
         elif ap.landed_since is not None:
             waited = stamp.sim_s - ap.landed_since
             delay = ap.config.disarm_delay_s
-            if ap.mode in (Mode.LAND, Mode.RTL) or (delay > 0 and waited >= delay):
+            if landing_disarms(ap) or (delay > 0 and waited >= delay):
                 disarm(ap, stamp)
         return
     if ap.grounded_since is None:
         return  # flying: the common case
-    taking_off = ap.mode == Mode.GUIDED and ap.guided == Guided.TAKEOFF
+    taking_off = (ap.mode == Mode.GUIDED and ap.guided == Guided.TAKEOFF) or (
+        ap.mode == Mode.AUTO and ap.auto_phase == "takeoff"
+    )
     if stamp.sim_s - ap.grounded_since >= ap.config.land_detect_s and not (
         taking_off and stamp.sim_s - ap.takeoff_started_s < 3.0
     ):
@@ -184,8 +207,14 @@ def update_ground_state(ap: Autopilot, stamp: Stamp) -> None:
         if ap.mode == Mode.GUIDED:
             ap.guided = Guided.IDLE
         idle_on_ground(ap)
-        if ap.mode in (Mode.LAND, Mode.RTL):
+        if landing_disarms(ap):
             disarm(ap, stamp, "Disarming motors")
+
+
+def landing_disarms(ap: Autopilot) -> bool:
+    """Touching down disarms: LAND, RTL, and AUTO's LAND and RTL items (``land_run``)."""
+    mode = ap.mode
+    return mode in (Mode.LAND, Mode.RTL) or (mode == Mode.AUTO and ap.auto_phase in ("land", "rtl"))
 
 
 def update_mode(ap: Autopilot, stamp: Stamp) -> None:
@@ -202,10 +231,10 @@ def update_mode(ap: Autopilot, stamp: Stamp) -> None:
     elif mode == Mode.LAND or (mode == Mode.RTL and ap.rtl_phase == "land"):
         set_limits(ap, descent=land_descent_rate(ap))
     elif mode == Mode.RTL:
-        _update_return(ap)
+        update_return(ap)
 
 
-def _update_return(ap: Autopilot) -> None:
+def update_return(ap: Autopilot) -> None:
     """RTL: climb, then fly home at the waypoint speed, then land."""
     i = ap.index
     est = ap.dynamics.estimated(i)

@@ -1,7 +1,9 @@
-"""The parameter protocol, the little a GCS needs to connect: PARAM_REQUEST_LIST and
-PARAM_REQUEST_READ answered with PARAM_VALUE; every parameter is read-only (PARAM_SET echoes
-the value in force and says so). Values mirror the autopilot's configuration under ArduCopter's
-names and units."""
+"""The parameter protocol, the little a GCS needs to connect: PARAM_REQUEST_LIST answered with
+every parameter in index order (each PARAM_VALUE with the total ``param_count`` and its
+``param_index``), PARAM_REQUEST_READ by name or index; every parameter is read-only (PARAM_SET
+echoes the value in force and says so). Values mirror the autopilot's configuration under
+ArduCopter's names and units. Parameter files over MAVFTP (``@PARAM/param.pck``) are refused at
+once (:mod:`vehicles.autopilot.ftp`), so tools fall back to PARAM_REQUEST_LIST."""
 
 from __future__ import annotations
 
@@ -37,6 +39,10 @@ def parameters(ap: Autopilot) -> list[tuple[str, float, int]]:
         ("LAND_SPEED", cfg.land_speed_mps * 100, real),
         ("RTL_ALT", cfg.rtl_altitude_m * 100, real),
         ("BATT_CAPACITY", airframe.battery_capacity_mah, integer),
+        ("WPNAV_RADIUS", cfg.waypoint_radius_m * 100, real),
+        ("FENCE_ENABLE", 0, integer),  # SYS_STATUS: geofence present, not enabled
+        ("AUTO_OPTIONS", 0, integer),  # AUTO neither arms nor takes off without MISSION_START
+        ("MIS_RESTART", 0, integer),  # AUTO resumes a mission where it stopped
     ]
 
 
@@ -46,8 +52,9 @@ def _text(value: object) -> str:
     return str(value).split("\x00", 1)[0]
 
 
-def _param_value(ap: Autopilot, index: int) -> mavlink.MAVLink_message:
-    params = parameters(ap)
+def _param_value(
+    params: list[tuple[str, float, int]], index: int
+) -> mavlink.MAVLink_param_value_message:
     name, value, kind = params[index]
     return mavlink.MAVLink_param_value_message(
         name.encode(), float(value), kind, len(params), index
@@ -65,18 +72,19 @@ def _param_index(ap: Autopilot, name: str, index: int) -> int | None:
 
 
 def on_param_request_list(ap: Autopilot, msg: mavlink.MAVLink_message, stamp: Stamp) -> None:
-    for index in range(len(parameters(ap))):
-        ap.send(_param_value(ap, index))
+    params = parameters(ap)
+    for index in range(len(params)):
+        ap.send(_param_value(params, index))
 
 
 def on_param_request_read(ap: Autopilot, msg: mavlink.MAVLink_message, stamp: Stamp) -> None:
     index = _param_index(ap, _text(msg.param_id), int(msg.param_index))
     if index is not None:
-        ap.send(_param_value(ap, index))
+        ap.send(_param_value(parameters(ap), index))
 
 
 def on_param_set(ap: Autopilot, msg: mavlink.MAVLink_message, stamp: Stamp) -> None:
     index = _param_index(ap, _text(msg.param_id), -1)
     if index is not None:  # read-only: echo the value in force
-        ap.send(_param_value(ap, index))
+        ap.send(_param_value(parameters(ap), index))
         ap.refuse("param", f"Param {_text(msg.param_id)} is read-only", stamp)

@@ -2,9 +2,17 @@
 (frames, type masks), checked and applied to the position controller, and the go-to points of
 DO_REPOSITION and guided mission items.
 
+Type masks are read as ArduCopter reads them (``GCS_MAVLINK_Copter::handle_message_set_position
+_target_local_ned``): a group (position, velocity, acceleration) with any of its three bits set is
+ignored as a whole; the force bit is refused only when acceleration is used; the combinations
+followed are position (+ velocity (+ acceleration)), velocity (+ acceleration), acceleration and
+position only; position with acceleration but no velocity, and a target with nothing, are refused.
+A position-only target is flown to and held like a DO_REPOSITION point (it never times out, as
+ArduCopter's position targets); a target with velocity or acceleration is extrapolated and
+trips the setpoint timeout (GUID_TIMEOUT, :mod:`vehicles.autopilot.failsafes`) if the stream stops.
+
 Position targets outside GUIDED are ignored silently (like ArduCopter); in GUIDED a refused one
-says why in a rate-limited STATUSTEXT (one limiter per kind of reason). A stream that stops
-for ``setpoint_timeout_s`` trips the setpoint timeout (:mod:`vehicles.autopilot.failsafes`).
+says why in a rate-limited STATUSTEXT (one limiter per kind of reason).
 """
 
 from __future__ import annotations
@@ -84,18 +92,26 @@ def check_point(ap: Autopilot, point: np.ndarray) -> np.ndarray | str:
     return point
 
 
+#: The groups of a type_mask: position, velocity, acceleration (any bit set ignores the group).
+_POSITION_BITS = 0b000000111
+_VELOCITY_BITS = 0b000111000
+_ACCELERATION_BITS = 0b111000000
+
+
 def check_mask(mask: int) -> tuple[bool, bool, bool] | str:
-    """(use position, use velocity, use acceleration) of a type_mask, or the reason it is
-    refused (force setpoints, some axes of a group ignored, nothing used)."""
-    if mask & mavlink.POSITION_TARGET_TYPEMASK_FORCE_SET:
+    """(use position, use velocity, use acceleration) of a type_mask, read as ArduCopter reads
+    it, or the reason it is refused (force with acceleration, position and acceleration without
+    velocity, nothing used)."""
+    use_pos = not mask & _POSITION_BITS
+    use_vel = not mask & _VELOCITY_BITS
+    use_acc = not mask & _ACCELERATION_BITS
+    if mask & mavlink.POSITION_TARGET_TYPEMASK_FORCE_SET and use_acc:
         return "Guided: force setpoints not supported"
-    groups = [(mask >> shift) & 0b111 for shift in (0, 3, 6)]
-    if any(group not in (0, 0b111) for group in groups):
-        return f"Guided: type_mask {mask} ignores only some axes"
-    use = tuple(group == 0 for group in groups)
-    if not any(use):
+    if not (use_pos or use_vel or use_acc):
         return "Guided: setpoint has no position, velocity or acceleration"
-    return use[0], use[1], use[2]
+    if use_pos and use_acc and not use_vel:
+        return "Guided: position and acceleration need velocity"
+    return use_pos, use_vel, use_acc
 
 
 # ---------------------------------------------------------------------- messages ------------
@@ -118,7 +134,9 @@ def on_position_target_local(ap: Autopilot, msg: mavlink.MAVLink_message, stamp:
 
     def to_enu(values: tuple[float, float, float]) -> np.ndarray:
         ned = np.array(values, dtype=float)
-        return ned_to_enu(rotate_body_to_ned(ned, yaw) if body else ned)
+        if body and finite(*values):  # (not finite: refused below, unrotated)
+            ned = rotate_body_to_ned(ned, yaw)
+        return ned_to_enu(ned)
 
     position = None
     if use_pos:
@@ -188,8 +206,9 @@ def apply_setpoint(
     yaw: float,
     stamp: Stamp,
 ) -> None:
-    """Follow a checked setpoint (GUIDED, armed, flying or taking off), feed-forwards
-    extrapolated for at most the setpoint timeout."""
+    """Follow a checked setpoint (GUIDED, armed, flying or taking off): a position alone is
+    flown to and held (no timeout); velocity and acceleration feed-forwards are extrapolated for
+    at most the setpoint timeout, which then applies."""
     if ap.mode != Mode.GUIDED or not ap.armed:
         return  # ignored silently, like ArduCopter
     if velocity is not None and not _within(velocity, ap.config.max_setpoint_speed_mps):
@@ -203,11 +222,19 @@ def apply_setpoint(
     if ap.landed and ap.guided != Guided.TAKEOFF:
         return  # like ArduCopter: a landed vehicle needs MAV_CMD_NAV_TAKEOFF first
     i = ap.index
-    horizon = min(ap.config.failsafe.setpoint_timeout_s, MAX_EXTRAPOLATION_S)
-    modes.set_limits(ap)
-    ap.dynamics.set_reference(
-        i, position, velocity, acceleration, horizon_s=horizon, time_s=stamp.sim_s
-    )
+    if velocity is None and acceleration is None:
+        ap.guided = Guided.GOTO  # ArduCopter's set_destination: no GUID_TIMEOUT
+        ap.last_setpoint = None
+        modes.set_limits(ap, speed=ap.config.waypoint_speed_mps)
+        ap.dynamics.hold(i, position)
+    else:
+        horizon = min(ap.config.failsafe.setpoint_timeout_s, MAX_EXTRAPOLATION_S)
+        modes.set_limits(ap)
+        ap.dynamics.set_reference(
+            i, position, velocity, acceleration, horizon_s=horizon, time_s=stamp.sim_s
+        )
+        ap.guided = Guided.SETPOINTS
+        ap.last_setpoint = stamp
     if not mask & mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE and finite(yaw):
         ap.dynamics.yaw_target[i] = yaw
     else:
@@ -215,8 +242,6 @@ def apply_setpoint(
     if ap.setpoint_timed_out:
         ap.setpoint_timed_out = False
         ap.status_text(mavlink.MAV_SEVERITY_INFO, "Guided: setpoints resumed")
-    ap.guided = Guided.SETPOINTS
-    ap.last_setpoint = stamp
 
 
 def goto(ap: Autopilot, point: np.ndarray, speed: float | None, stamp: Stamp) -> bool:

@@ -70,6 +70,7 @@ class AutopilotStatus:
     mode: Mode
     guided: Guided
     rtl_phase: str  # "", "climb", "return", "land"
+    auto_phase: str  # AUTO's item in progress: "", "takeoff_wait", "takeoff", "wp", "land", ...
     armed: bool
     landed: bool
     gcs_failsafe: bool  # the GCS failsafe is on (holding or landing)
@@ -84,6 +85,10 @@ class AutopilotStatus:
     #: (simulated s, roll, pitch, yaw) of the last ATTITUDE sent: ATTITUDE's rates are the
     #: differences between the attitudes reported
     reported_attitude: tuple[float, float, float, float] | None
+    mission_count: int  # items of the stored mission, home (item 0) included
+    mission_nav: int  # the navigation item AUTO is at (0: none yet)
+    mission_running: bool  # AUTO is flying the mission
+    mission_complete: bool
 
     @property
     def airborne(self) -> bool:
@@ -116,11 +121,32 @@ class AutopilotStatus:
         air."""
         if not self.airborne:
             return mavlink.MAV_LANDED_STATE_ON_GROUND
-        if self.mode == Mode.GUIDED and self.guided == Guided.TAKEOFF:
+        mode = self.mode
+        if (mode == Mode.GUIDED and self.guided == Guided.TAKEOFF) or (
+            mode == Mode.AUTO and self.auto_phase == "takeoff"
+        ):
             return mavlink.MAV_LANDED_STATE_TAKEOFF
-        if self.mode == Mode.LAND or (self.mode == Mode.RTL and self.rtl_phase == "land"):
+        if (
+            mode == Mode.LAND
+            or (mode == Mode.RTL and self.rtl_phase == "land")
+            or (mode == Mode.AUTO and self.auto_phase == "land")
+            or (mode == Mode.AUTO and self.auto_phase == "rtl" and self.rtl_phase == "land")
+        ):
             return mavlink.MAV_LANDED_STATE_LANDING
         return mavlink.MAV_LANDED_STATE_IN_AIR
+
+    @property
+    def mission_state(self) -> int:
+        """MISSION_CURRENT's MISSION_STATE (``GCS_MAVLINK::mission_state``)."""
+        if self.mission_count <= 1:
+            return mavlink.MISSION_STATE_NO_MISSION
+        if self.mission_complete:
+            return mavlink.MISSION_STATE_COMPLETE
+        if self.mission_running:
+            return mavlink.MISSION_STATE_ACTIVE
+        if self.mission_nav > 0:
+            return mavlink.MISSION_STATE_PAUSED
+        return mavlink.MISSION_STATE_NOT_STARTED
 
     @property
     def battery(self) -> BatteryState:

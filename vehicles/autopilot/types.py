@@ -1,5 +1,6 @@
 """The autopilot's identity and small value types: its MAVLink component, a moment
-(:class:`Stamp`), the ArduCopter flight modes it implements and what GUIDED is doing."""
+(:class:`Stamp`), the ArduCopter flight modes it implements, the modes it arms in and what
+GUIDED is doing."""
 
 from __future__ import annotations
 
@@ -14,12 +15,17 @@ AUTOPILOT_COMPONENT = 1  # MAV_COMP_ID_AUTOPILOT1
 #: ArduCopter flight modes the simulation implements (custom_mode numbers, pymavlink's).
 Mode = IntEnum(
     "Mode",
-    {name: COPTER_MODE[name] for name in ("STABILIZE", "GUIDED", "LOITER", "RTL", "LAND", "BRAKE")},
+    {
+        name: COPTER_MODE[name]
+        for name in ("STABILIZE", "AUTO", "GUIDED", "LOITER", "RTL", "LAND", "BRAKE")
+    },
     module=__name__,
 )
 
 
-ARMABLE_MODES = (Mode.GUIDED, Mode.LOITER)
+#: The modes ArduCopter arms in (``Mode::allows_arming``): STABILIZE (it boots in it), GUIDED and
+#: LOITER; AUTO only with AUTO_OPTIONS bit 0 (0 here), RTL, LAND and BRAKE never.
+ARMABLE_MODES = (Mode.STABILIZE, Mode.GUIDED, Mode.LOITER)
 
 
 class Guided(IntEnum):
@@ -28,8 +34,9 @@ class Guided(IntEnum):
     IDLE = 0  # on the ground (armed or not), waiting for a takeoff
     TAKEOFF = 1
     HOLD = 2  # holding a point (after takeoff, on entry, after a setpoint timeout)
-    SETPOINTS = 3  # following SET_POSITION_TARGET_* (subject to the setpoint timeout)
-    GOTO = 4  # flying to a point given by DO_REPOSITION / guided mission item (no timeout)
+    SETPOINTS = 3  # velocity/acceleration SET_POSITION_TARGET_* (GUID_TIMEOUT applies)
+    GOTO = 4  # flying to a point: DO_REPOSITION, guided mission item, position-only target
+    #         (no timeout, like ArduCopter's position targets)
 
 
 @dataclass(frozen=True)

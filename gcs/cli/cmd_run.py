@@ -383,16 +383,10 @@ def sim_setup(mission, formation, args, leaders, log_path: Path) -> SimVehicleSe
 def _capture(recorder: FlightRecorder, uav: int, forwarder: Forwarder | None):
     """Every message of UAV `uav`'s link into the log; what the UAV sent also to the --out
     tools."""
-    if forwarder is None:
 
-        def capture(direction: str, raw: bytes, message, wall: float) -> None:
-            recorder.mavlink(uav, direction, raw, message, wall)
-
-        return capture
-
-    def capture_and_forward(direction: str, raw: bytes, message, wall: float) -> None:
+    def capture(direction: str, raw: bytes, message, wall: float) -> None:
         recorder.mavlink(uav, direction, raw, message, wall)
-        if direction == "rx":
+        if forwarder is not None and direction == "rx":
             forwarder.from_uav(raw)
 
-    return capture_and_forward
+    return capture

@@ -34,6 +34,14 @@ class InputError(Exception):
         return self.message
 
 
+class RowsRefused(InputError):
+    """A parking row refused (eqs. 14-15) for rows sized for `fleet_size` UAVs."""
+
+    def __init__(self, file: str | Path | None, key_path: str, expected: str, fleet_size: int):
+        super().__init__(file, key_path, expected)
+        self.fleet_size = fleet_size
+
+
 def join_key(parent: str, key: str | int) -> str:
     """Extend a key path: `join_key("obstacles", 3)` -> `obstacles[3]`, then `.rectangle`."""
     if isinstance(key, int):

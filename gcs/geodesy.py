@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-import pymap3d
 
 from fleetwire.geodesy import EnuFrame
 
@@ -35,6 +34,8 @@ def geodetic_to_enu(
     lat: np.ndarray | float, lon: np.ndarray | float, alt: np.ndarray | float, origin: Origin
 ) -> np.ndarray:
     """WGS84 (degrees, metres) -> local (..., 3) east, north, up in metres."""
+    import pymap3d  # here: its import (dateutil, its time modules) costs every `gcs` start
+
     e, n, u = pymap3d.geodetic2enu(lat, lon, alt, origin.lat, origin.lon, origin.alt)
     return np.stack(np.broadcast_arrays(e, n, u), axis=-1).astype(float)
 

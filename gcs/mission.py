@@ -35,14 +35,15 @@ Defaults (every key not listed as required is optional):
   mission file.
 
 Obstacles: `rectangle` (center, size, angle_deg) and `polygon` are solid polygons, `segment` a
-wall, `geojson` a file (relative to the mission file) of lon/lat footprints: Polygon and
-MultiPolygon features become solid polygons (holes ignored: a courtyard is not flyable),
-LineString and MultiLineString features walls; features without geometry are skipped.
+wall, `geojson` a footprint file (relative to the mission file; `FILE` or `{file, strict, crs,
+height_key, bbox}`) read by `gcs.footprints`: Polygon and MultiPolygon features become solid
+polygons (holes ignored: a courtyard is not flyable), LineString and MultiLineString features
+walls; what was skipped, repaired, dropped or left out below the flight is in
+`Mission.footprints` and one warning line per file (logger `gcs.footprints`).
 """
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from dataclasses import dataclass, field
@@ -54,8 +55,18 @@ import shapely
 import yaml
 
 from gcs.errors import InputError, join_key
-from gcs.geodesy import Origin, lonlat_to_local
+from gcs.footprints import (
+    MAX_FOOTPRINT_DISTANCE_M,  # noqa: F401 - re-exported
+    FootprintError,
+    FootprintOptions,
+    FootprintReport,
+    Footprints,
+    read_footprints,
+)
+from gcs.footprints import log as footprint_log
+from gcs.geodesy import Origin
 from planner.formation import DISTANCE_TOLERANCE, min_radio_range
+from planner.numbers import fmt_against
 from planner.obstacles import Obstacles
 
 #: The only mission file version this code reads.
@@ -64,8 +75,8 @@ VERSION = 1
 DEFAULT_ORIGIN = Origin(lat=-35.363262, lon=149.165237, alt=584.0)
 #: Fraction of the safety margin reserved for tracking error and noise by default.
 DEFAULT_TRACKING_FRACTION = 0.3
-#: Footprints further than this from the origin are refused (a wrong origin, most likely).
-MAX_FOOTPRINT_DISTANCE_M = 100_000.0
+#: Footprints further than this from the origin are refused (a wrong origin, most likely):
+#: `gcs.footprints.MAX_FOOTPRINT_DISTANCE_M`, imported above.
 BACKENDS = ("sim", "ardupilot", "px4")
 PARKING = ("segment", "ray")
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")
@@ -211,6 +222,8 @@ class Mission:
     sim: Sim
     radio: Radio
     signing: Signing
+    #: One report per footprint file (`obstacles[i].geojson`), in obstacle order.
+    footprints: tuple[FootprintReport, ...] = ()
 
     @property
     def error_budget(self) -> float:
@@ -218,8 +231,10 @@ class Mission:
         return self.safety_margin - self.vehicle.tracking_allowance
 
 
-def load_mission(path: str | Path) -> Mission:
-    """Read and validate a mission file; raise `InputError` on anything CONTRACTS.md refuses."""
+def load_mission(path: str | Path, *, check_clearance: bool = True) -> Mission:
+    """Read and validate a mission file; raise `InputError` on anything CONTRACTS.md refuses.
+    `check_clearance=False` skips only the test that A and B keep safety_margin from every
+    obstacle (to suggest where they could go instead)."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -238,12 +253,14 @@ def load_mission(path: str | Path) -> Mission:
         at = f" at line {where.line + 1}, column {where.column + 1}" if where else ""
         problem = getattr(exc, "problem", None) or "syntax error"
         raise InputError(path, "", f"valid YAML ({problem}{at})") from None
-    return parse_mission(data, path, text)
+    return parse_mission(data, path, text, check_clearance=check_clearance)
 
 
-def parse_mission(data: Any, source: Path, text: str = "") -> Mission:
+def parse_mission(
+    data: Any, source: Path, text: str = "", *, check_clearance: bool = True
+) -> Mission:
     """Validate already-parsed YAML `data` read from `source` (for paths and messages)."""
-    return _Parser(Path(source)).mission(data, text)
+    return _Parser(Path(source), check_clearance).mission(data, text)
 
 
 # --- YAML loading --------------------------------------------------------------------------
@@ -256,7 +273,12 @@ class _DuplicateKey(yaml.YAMLError):
         self.line = line
 
 
-class _Loader(yaml.SafeLoader):
+#: libyaml's parser when PyYAML was built with it (about 5x faster on big maps), else PyYAML's
+#: own; both safe, with the same marks (line numbers) and constructors.
+_SafeLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class _Loader(_SafeLoader):
     """Safe YAML loader that refuses duplicate keys and reads YAML 1.2 floats such as 1e3."""
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
@@ -303,8 +325,10 @@ def _describe(value: Any) -> str:
     return repr(value)
 
 
-def _fmt(x: float) -> str:
-    return f"{x:.6g}"
+def _fmt(x: float, against: float | None = None) -> str:
+    """A number in a message: 6 significant digits, or more until it no longer reads as
+    `against`, the limit it is compared with (format the limit with `against=` the value too)."""
+    return f"{x:.6g}" if against is None else fmt_against(x, against, 6)
 
 
 def _is_number(value: Any) -> bool:
@@ -314,8 +338,9 @@ def _is_number(value: Any) -> bool:
 class _Parser:
     """Walks the YAML tree with key paths; every refusal raises `InputError`."""
 
-    def __init__(self, source: Path) -> None:
+    def __init__(self, source: Path, check_clearance: bool = True) -> None:
         self.source = source
+        self.check_clearance = check_clearance
 
     def fail(self, path: str, expected: str) -> InputError:
         return InputError(self.source, path, expected)
@@ -357,22 +382,24 @@ class _Parser:
     ) -> float:
         """A finite YAML number within [low, high] (open ends where asked)."""
         suffix = f" ({unit})" if unit else ""
-        if low == 0 and low_open and high is None:
-            want = f"a finite number > 0{suffix}"
-        elif low == 0 and not low_open and high is None:
-            want = f"a finite number >= 0{suffix}"
-        elif low is not None and high is not None:
-            lo, hi = "(" if low_open else "[", ")" if high_open else "]"
-            want = f"a number in {lo}{_fmt(low)}, {_fmt(high)}{hi}{suffix}"
-        else:
-            want = f"a finite number{suffix}"
+
+        def want(got: float | None = None) -> str:  # each bound told apart from `got`
+            if low == 0 and low_open and high is None:
+                return f"a finite number > 0{suffix}"
+            if low == 0 and not low_open and high is None:
+                return f"a finite number >= 0{suffix}"
+            if low is not None and high is not None:
+                lo, hi = "(" if low_open else "[", ")" if high_open else "]"
+                return f"a number in {lo}{_fmt(low, got)}, {_fmt(high, got)}{hi}{suffix}"
+            return f"a finite number{suffix}"
+
         if not _is_number(value) or not math.isfinite(value):
-            raise self.fail(path, f"{want}, got {_describe(value)}")
+            raise self.fail(path, f"{want()}, got {_describe(value)}")
         value = float(value)
         if low is not None and (value < low or (low_open and value <= low)):
-            raise self.fail(path, f"{want}, got {_fmt(value)}")
+            raise self.fail(path, f"{want(value)}, got {_fmt(value, low)}")
         if high is not None and (value > high or (high_open and value >= high)):
-            raise self.fail(path, f"{want}, got {_fmt(value)}")
+            raise self.fail(path, f"{want(value)}, got {_fmt(value, high)}")
         return value
 
     def positive(self, value: Any, path: str, unit: str = "") -> float:
@@ -435,8 +462,8 @@ class _Parser:
         if radio_range < needed - DISTANCE_TOLERANCE:
             raise self.fail(
                 "radio_range",
-                f"at least 2(1+sqrt 2) x safety_margin = {_fmt(needed)} m (eq. 9), "
-                f"got {_fmt(radio_range)}",
+                f"at least 2(1+sqrt 2) x safety_margin = {_fmt(needed, radio_range)} m "
+                f"(eq. 9), got {_fmt(radio_range, needed)}",
             )
         altitude = self.positive(root["altitude"], "altitude", "m")
         parking = self.choice(root.get("parking", "segment"), "parking", PARKING)
@@ -449,7 +476,9 @@ class _Parser:
                 self.sequence(root.get("base_stations", []), "base_stations", "{x, y}")
             )
         )
-        obstacles, keys = self.obstacles(root.get("obstacles", []), origin)
+        obstacles, keys = self.obstacles(
+            root.get("obstacles", []), origin, height_limit=altitude - safety_margin
+        )
         ground_users = self.ground_users(root.get("ground_users", []))
         sim = self.sim(root.get("sim", {}))
         radio = self.radio(root.get("radio", {}))
@@ -457,7 +486,11 @@ class _Parser:
         if np.linalg.norm(goal.xy - start.xy) <= DISTANCE_TOLERANCE:
             raise self.fail("goal", f"a point different from start, got ({goal.x:g}, {goal.y:g})")
         for key, pose in (("start", start), ("goal", goal)):
-            self.clear_of_obstacles(key, pose, obstacles, keys, safety_margin)
+            if self.check_clearance:
+                self.clear_of_obstacles(key, pose, obstacles, keys, safety_margin)
+        for report in self.footprint_reports:  # once the mission is accepted: one line each
+            if report.noteworthy:
+                footprint_log.warning("%s", report.line())
         return Mission(
             source=self.source,
             text=text,
@@ -480,6 +513,7 @@ class _Parser:
             sim=sim,
             radio=radio,
             signing=signing,
+            footprints=tuple(self.footprint_reports),
         )
 
     def name(self, value: Any) -> str:
@@ -523,7 +557,8 @@ class _Parser:
         if radius >= safety_margin:
             raise self.fail(
                 "vehicle.radius",
-                f"less than safety_margin ({_fmt(safety_margin)} m), got {_fmt(radius)}",
+                f"less than safety_margin ({_fmt(safety_margin, radius)} m), "
+                f"got {_fmt(radius, safety_margin)}",
             )
         default_allowance = DEFAULT_TRACKING_FRACTION * safety_margin
         allowance = self.number(
@@ -550,14 +585,16 @@ class _Parser:
         if vmax > vehicle.max_speed:
             raise self.fail(
                 "speed.max",
-                f"at most vehicle.max_speed ({_fmt(vehicle.max_speed)} m/s), got {_fmt(vmax)}",
+                f"at most vehicle.max_speed ({_fmt(vehicle.max_speed, vmax)} m/s), "
+                f"got {_fmt(vmax, vehicle.max_speed)}",
             )
         initial = vmax
         if "initial" in m:
             initial = self.nonnegative(m["initial"], "speed.initial", "m/s")
             if initial > vmax:
                 raise self.fail(
-                    "speed.initial", f"at most speed.max ({_fmt(vmax)} m/s), got {_fmt(initial)}"
+                    "speed.initial",
+                    f"at most speed.max ({_fmt(vmax, initial)} m/s), got {_fmt(initial, vmax)}",
                 )
         changes = []
         items = self.sequence(m.get("changes", []), "speed.changes", "{at, speed[, leader]}")
@@ -568,8 +605,8 @@ class _Parser:
             if changes and at <= changes[-1].at:
                 raise self.fail(
                     join_key(path, "at"),
-                    f"a time after speed.changes[{i - 1}].at ({_fmt(changes[-1].at)} s): "
-                    f"times strictly increasing, got {_fmt(at)}",
+                    f"a time after speed.changes[{i - 1}].at ({_fmt(changes[-1].at, at)} s): "
+                    f"times strictly increasing, got {_fmt(at, changes[-1].at)}",
                 )
             speed = self.number(
                 c["speed"],
@@ -675,7 +712,12 @@ class _Parser:
 
     # obstacles
 
-    def obstacles(self, value: Any, origin: Origin) -> tuple[Obstacles, tuple[str, ...]]:
+    def obstacles(
+        self, value: Any, origin: Origin, height_limit: float | None = None
+    ) -> tuple[Obstacles, tuple[str, ...]]:
+        """The obstacle list -> Obstacles and their key paths; footprint files' reports go to
+        `self.footprint_reports`. `height_limit` = altitude - safety_margin (heights rule)."""
+        self.footprint_reports: list[FootprintReport] = []
         polygons: list[np.ndarray] = []
         polygon_keys: list[str] = []
         walls: list[np.ndarray] = []
@@ -700,11 +742,12 @@ class _Parser:
                 walls.append(self.segment(spec, sub))
                 wall_keys.append(sub)
             else:
-                geo_polys, geo_walls = self.geojson(spec, sub, origin)
-                polygons.extend(p for _, p in geo_polys)
-                polygon_keys.extend(f"{sub}.features[{k}]" for k, _ in geo_polys)
-                walls.extend(w for _, w in geo_walls)
-                wall_keys.extend(f"{sub}.features[{k}]" for k, _ in geo_walls)
+                found = self.geojson(spec, sub, origin, height_limit)
+                polygons.extend(p for _, p in found.polygons)
+                polygon_keys.extend(f"{sub}.{label}" for label, _ in found.polygons)
+                walls.extend(w for _, w in found.walls)
+                wall_keys.extend(f"{sub}.{label}" for label, _ in found.walls)
+                self.footprint_reports.append(found.report)
         obstacles = Obstacles(
             polygons=tuple(polygons),
             walls=np.array(walls, float).reshape(-1, 2, 2),
@@ -745,122 +788,64 @@ class _Parser:
         return ends
 
     def geojson(
-        self, value: Any, path: str, origin: Origin
-    ) -> tuple[list[tuple[int, np.ndarray]], list[tuple[int, np.ndarray]]]:
-        """Footprints of a GeoJSON file -> (feature index, local ring) and (index, wall)."""
-        name = self.string(value, path, "a GeoJSON file path (relative to the mission file)")
-        file = self.source.parent / name
-        try:
-            doc = json.loads(file.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError) as exc:
-            reason = getattr(exc, "strerror", None) or type(exc).__name__
-            raise self.fail(path, f"a readable GeoJSON file: {name} ({reason})") from None
-        except json.JSONDecodeError as exc:
-            raise self.fail(
-                path, f"a GeoJSON file: {name} is not JSON (line {exc.lineno}, col {exc.colno})"
-            ) from None
-        features = self._features(doc, path, name)
-        polygons: list[tuple[int, np.ndarray]] = []
-        walls: list[tuple[int, np.ndarray]] = []
-        for k, geometry in features:
-            where = f"{name} features[{k}]"
-            kind = geometry.get("type") if isinstance(geometry, dict) else None
-            coords = geometry.get("coordinates") if isinstance(geometry, dict) else None
-            if kind == "Polygon":
-                rings = [self._lonlat_ring(coords, path, where)]
-            elif kind == "MultiPolygon" and isinstance(coords, list):
-                rings = [self._lonlat_ring(c, path, where) for c in coords]
-            elif kind == "LineString":
-                lines = [self._lonlat_line(coords, path, where)]
-            elif kind == "MultiLineString" and isinstance(coords, list):
-                lines = [self._lonlat_line(c, path, where) for c in coords]
-            else:
-                raise self.fail(
-                    path,
-                    f"Polygon, MultiPolygon, LineString or MultiLineString geometries "
-                    f"with coordinates ({where} is {kind if isinstance(kind, str) else _describe(kind)})",
-                )
-            if kind.endswith("Polygon"):
-                for ring in rings:
-                    local = lonlat_to_local(ring, origin)
-                    self._near_origin(local, path, where)
-                    shape = shapely.Polygon(local)
-                    if not shape.is_valid or shape.area <= DISTANCE_TOLERANCE:
-                        raise self.fail(
-                            path, f"simple footprints with non-zero area ({where} is not)"
-                        )
-                    polygons.append((k, local))
-            else:
-                for line in lines:
-                    local = lonlat_to_local(line, origin)
-                    self._near_origin(local, path, where)
-                    keep = np.r_[
-                        True, np.linalg.norm(np.diff(local, axis=0), axis=1) > DISTANCE_TOLERANCE
-                    ]
-                    local = local[keep]
-                    walls.extend((k, seg) for seg in np.stack([local[:-1], local[1:]], axis=1))
-        if not polygons and not walls:
-            raise self.fail(path, f"at least one footprint in {name}, found none")
-        return polygons, walls
-
-    def _features(self, doc: Any, path: str, name: str) -> list[tuple[int, Any]]:
-        kind = doc.get("type") if isinstance(doc, dict) else None
-        if kind == "FeatureCollection" and isinstance(doc.get("features"), list):
-            features = doc["features"]
-        elif kind == "Feature":
-            features = [doc]
-        elif kind in ("Polygon", "MultiPolygon", "LineString", "MultiLineString"):
-            return [(0, doc)]
+        self, value: Any, path: str, origin: Origin, height_limit: float | None = None
+    ) -> Footprints:
+        """A footprint file item (`FILE` or `{file, strict, crs, height_key, bbox}`) ->
+        `gcs.footprints.Footprints` (labelled local rings and walls, and the report)."""
+        if isinstance(value, dict):
+            keys = ("file", "strict", "crs", "height_key", "bbox")
+            m = self.mapping(value, path, keys, ("file",))
+            options = FootprintOptions(
+                file=self.string(
+                    m["file"],
+                    join_key(path, "file"),
+                    "a footprint file path (relative to the mission file)",
+                ),
+                strict=self.boolean(m.get("strict", False), join_key(path, "strict")),
+                crs=(
+                    self.string(m["crs"], join_key(path, "crs"), "a CRS such as EPSG:3857")
+                    if "crs" in m
+                    else None
+                ),
+                height_key=(
+                    self.string(m["height_key"], join_key(path, "height_key"), "a property name")
+                    if "height_key" in m
+                    else None
+                ),
+                bbox=self.bbox(m["bbox"], join_key(path, "bbox")) if "bbox" in m else None,
+            )
         else:
-            raise self.fail(path, f"a GeoJSON FeatureCollection, Feature or geometry in {name}")
-        out = []
-        for k, feature in enumerate(features):
-            if not isinstance(feature, dict) or feature.get("type") != "Feature":
-                raise self.fail(path, f"GeoJSON features ({name} features[{k}] is not one)")
-            if feature.get("geometry") is not None:
-                out.append((k, feature["geometry"]))
-        return out
-
-    def _lonlat_positions(self, coords: Any, path: str, where: str) -> np.ndarray:
+            options = FootprintOptions(
+                file=self.string(
+                    value,
+                    path,
+                    "a GeoJSON file path (relative to the mission file) or "
+                    "{file, strict, crs, height_key, bbox}",
+                )
+            )
         try:
-            array = np.array(
-                [p[:2] for p in coords if isinstance(p, list) and len(p) >= 2], dtype=float
+            return read_footprints(
+                self.source.parent / options.file,
+                options,
+                origin,
+                key=path,
+                height_limit=height_limit,
             )
-        except (TypeError, ValueError):
-            array = np.zeros((0, 2))
-        valid = (
-            isinstance(coords, list)
-            and array.shape == (len(coords), 2)
-            and all(_is_number(v) for p in coords for v in p[:2])
-            and np.isfinite(array).all()
-            and (np.abs(array[:, 0]) <= 180).all()
-            and (np.abs(array[:, 1]) <= 90).all()
+        except FootprintError as exc:
+            raise self.fail(join_key(path, exc.key) if exc.key else path, exc.expected) from None
+
+    def bbox(self, value: Any, path: str) -> tuple[float, float, float, float]:
+        """[west, south, east, north] in degrees, west < east, south < north."""
+        want = "[west, south, east, north] in degrees"
+        if not isinstance(value, list) or len(value) != 4:
+            raise self.fail(path, f"{want}, got {_describe(value)}")
+        west, south, east, north = (
+            self.number(v, join_key(path, i), low=-lim, high=lim, unit="degrees")
+            for i, (v, lim) in enumerate(zip(value, (180.0, 90.0, 180.0, 90.0), strict=True))
         )
-        if not valid:
-            raise self.fail(path, f"[longitude, latitude] positions in degrees ({where})")
-        return array
-
-    def _lonlat_ring(self, coords: Any, path: str, where: str) -> np.ndarray:
-        if not isinstance(coords, list) or not coords:
-            raise self.fail(path, f"a polygon's list of rings ({where})")
-        ring = self._lonlat_positions(coords[0], path, where)  # outer ring; holes ignored
-        if len(ring) < 4 or not np.array_equal(ring[0], ring[-1]):
-            raise self.fail(path, f"closed rings of at least 4 positions ({where})")
-        return ring[:-1]
-
-    def _lonlat_line(self, coords: Any, path: str, where: str) -> np.ndarray:
-        line = self._lonlat_positions(coords, path, where)
-        if len(line) < 2:
-            raise self.fail(path, f"lines of at least 2 positions ({where})")
-        return line
-
-    def _near_origin(self, local: np.ndarray, path: str, where: str) -> None:
-        if np.abs(local).max() > MAX_FOOTPRINT_DISTANCE_M:
-            raise self.fail(
-                path,
-                f"footprints within {MAX_FOOTPRINT_DISTANCE_M / 1000:g} km of origin "
-                f"({where} is {np.abs(local).max() / 1000:.0f} km away: is origin right?)",
-            )
+        if not (west < east and south < north):
+            raise self.fail(path, f"{want} with west < east and south < north")
+        return (west, south, east, north)
 
     def clear_of_obstacles(
         self,
@@ -882,9 +867,10 @@ class _Parser:
             dist = shapely.distance(geoms, point)
             worst = int(hits[int(np.argmin(dist))])
             inside = float(dist.min()) == 0.0
-            got = "inside it" if inside else f"{_fmt(float(dist.min()))} m from it"
+            nearest = float(dist.min())
+            got = "inside it" if inside else f"{_fmt(nearest, safety_margin)} m from it"
             raise self.fail(
                 key,
-                f"a point at least safety_margin ({_fmt(safety_margin)} m) from every "
+                f"a point at least safety_margin ({_fmt(safety_margin, nearest)} m) from every "
                 f"obstacle; it is {got}: {keys[worst]}",
             )

@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from gcs.errors import InputError
+from gcs.errors import InputError, RowsRefused
 from gcs.mission import Mission, SpeedSchedule
 from planner.formation import (
     ParkingRows,
@@ -41,7 +42,7 @@ from planner.kinematics import (
     safe_speed,
     smoothing_error_bound,
 )
-from planner.search import plan_path
+from planner.search import SearchProgress, plan_path
 from planner.types import PathPlan, PathProblem
 from planner.validity import row_refusal
 
@@ -89,12 +90,18 @@ def plan_mission(
     cap_speed: bool = False,
     connections: tuple[str, ...] | None = None,
     method: str = "exact",
+    time_limit_s: float | None = None,
+    on_progress: Callable[[SearchProgress, float], None] | None = None,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> MissionPlan:
     """Plan `mission`; raise `InputError` for the plan-dependent refusals (exit 2).
 
     `cap_speed` (or the mission's `speed.cap_to_safe`) caps every speed to the safe speed
     instead of refusing; `connections` overrides `fleet.connections` (e.g. `--connect`).
     A mission without a valid path is returned with `valid == False` and the reason.
+    The path search stops after `time_limit_s` seconds of `clock` (the plan is then the best
+    valid path found so far, `path_plan.stopped`); `on_progress(progress, elapsed_s)` is
+    called as it goes.
     """
     conns = mission.fleet.connections if connections is None else tuple(connections)
     conn_key = "fleet.connections" if connections is None else "--connect"
@@ -129,9 +136,16 @@ def plan_mission(
         method=method,
     )
     check_rows(mission, problem, first_rows, fixed or lower)
-    began = time.perf_counter()
-    path_plan = plan_path(problem)
-    planning_time = time.perf_counter() - began
+    began = clock()
+
+    def progress(state: SearchProgress) -> bool:
+        elapsed = clock() - began
+        if on_progress is not None:
+            on_progress(state, elapsed)
+        return time_limit_s is not None and elapsed >= time_limit_s
+
+    path_plan = plan_path(problem, progress)
+    planning_time = clock() - began
 
     speeds = mission.speed
     profile = _profile(speeds)
@@ -207,22 +221,24 @@ def check_rows(mission: Mission, problem: PathProblem, rows: ParkingRows, fleet_
     length = (fleet_size - 1) * collision_spacing(rho) + rho
     size = "" if mission.parking == "ray" else f", {length:.4g} m for {fleet_size} UAVs"
     if refusal.subject == "rows":
-        raise InputError(
+        raise RowsRefused(
             mission.source,
             "goal.theta_deg",
             f"parking rows at least 2 x safety_margin = {2 * rho:g} m apart (eq. 15); the rows "
             f"behind start and beyond goal{size} are {refusal.distance:.3g} m apart",
+            fleet_size,
         )
     key, where = {
         "start_row": ("start", "behind start"),
         "goal_row": ("goal", "beyond goal"),
     }[refusal.subject]
-    raise InputError(
+    raise RowsRefused(
         mission.source,
         f"{key}.theta_deg",
         f"a parking row ({where}{size}) at least safety_margin = {rho:g} m from "
         f"every obstacle (eq. 14); {mission.obstacle_keys[refusal.obstacle]} is "
         f"{refusal.distance:.3g} m from it",
+        fleet_size,
     )
 
 
@@ -251,6 +267,11 @@ def plan_json(plan: MissionPlan) -> dict[str, Any]:
             "A": _points(plan.formation.start_slots) if plan.formation else [],
             "B": _points(plan.formation.goal_slots) if plan.formation else [],
         },
+        "certified": bool(pp.certified),
+        "lower_bound_m": _number(pp.lower_bound_m),
+        "gap_m": _number(pp.length_m - pp.lower_bound_m) if plan.valid else None,
+        "graph": pp.level or None,
+        "stopped": bool(pp.stopped),
         "iterations": _integer(pp.iterations),
         "expansions": _integer(pp.expansions),
         "node_count": _integer(pp.node_count),
@@ -268,6 +289,9 @@ def plan_json(plan: MissionPlan) -> dict[str, Any]:
         "altitude_m": mission.altitude,
         "origin": {"lat": mission.origin.lat, "lon": mission.origin.lon, "alt": mission.origin.alt},
     }
+    from gcs.footprints import map_json  # the footprint files' reports (docs/outputs.md)
+
+    out["map"] = map_json(mission.footprints)
     return out
 
 

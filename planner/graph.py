@@ -112,6 +112,11 @@ def graph_nodes(problem: PathProblem) -> Nodes:
     obs_cone = np.concatenate(cones) if len(segs) else np.zeros((0, 2, 2))
     obs_owner = np.tile(obstacles.segment_owner, 4)
 
+    # Nodes inside an obstacle's margin go first (one vectorised test on the prepared union;
+    # merged nodes lie within the tolerance of each other, so go or stay together).
+    inside = obstacles.points_within(obs_pts, rho - DISTANCE_TOLERANCE)
+    obs_pts, obs_anchor, obs_cone = obs_pts[~inside], obs_anchor[~inside], obs_cone[~inside]
+    obs_owner = obs_owner[~inside]
     all_pts = np.vstack([base_pts, obs_pts])
     kind = np.concatenate([base_kind, np.full(len(obs_pts), KIND_OBSTACLE)])
     anchor = np.vstack([np.full((6, 2), np.nan), obs_anchor])
@@ -289,6 +294,9 @@ def edge_ok(problem: PathProblem, rows, starts: np.ndarray, ends: np.ndarray) ->
 class EdgeCache:
     """Obstacle-clear out-edges of graph nodes, computed on demand per spatial tile.
 
+    `within` keeps only the nodes inside the ellipse |Av| + |vB| < within: every path shorter
+    than `within` lies in it, so a search bounded by `within` loses nothing.
+
     Edges are numbered in the order they are computed; `src`, `dst`, `length`, `direction`
     (unit) and `penalty` (extra weight, for the repair loops) are indexed by edge number.
     `edges(v)` returns the (lo, hi) range of node v's out-edges.
@@ -302,6 +310,7 @@ class EdgeCache:
         taut: bool,
         prune_collinear: bool,
         local_candidates: int | None = None,
+        within: float | None = None,
     ) -> None:
         self.problem = problem
         self.nodes = nodes
@@ -312,6 +321,11 @@ class EdgeCache:
             member = (nodes.kind <= KIND_GOAL) | ((nodes.kind == KIND_OBSTACLE) & ~nodes.flat)
         else:
             member = np.ones(count, bool)
+        if within is not None:
+            # Only nodes a path shorter than `within` can visit: |Av| + |vB| < within.
+            pts = nodes.points
+            detour = np.hypot(*(pts - pts[START]).T) + np.hypot(*(pts - pts[GOAL]).T)
+            member &= (nodes.kind <= KIND_GOAL) | (detour < within + DISTANCE_TOLERANCE)
         self.members = np.flatnonzero(member)
         self.targets = self.members[self.members != START]
         self.first = np.full(count, -1, np.int64)
@@ -326,6 +340,7 @@ class EdgeCache:
         self.side_at_src = np.zeros(0)  # corner_side of each edge at its source
         self.side_at_dst = np.zeros(0)  # ... and at its destination
         self.radius: float | None = None
+        self.goal_distance: np.ndarray | None = None  # the search heuristic, once computed
         self._shadow: np.ndarray | None = None
         self._shadow_done = np.zeros(0, bool)
         pts = nodes.points
@@ -339,7 +354,7 @@ class EdgeCache:
         obstacles = problem.obstacles
         self._occluder_radius = math.inf
         if len(obstacles) > _OCCLUDERS:
-            box = obstacles.vertex_table.reshape(-1, 2)
+            box = obstacles.vertices[0]
             span = box.max(axis=0) - box.min(axis=0)
             area = max(float(span[0] * span[1]), 1.0)
             self._occluder_radius = math.sqrt(4.0 * _OCCLUDERS * area / (math.pi * len(obstacles)))
@@ -505,14 +520,22 @@ class EdgeCache:
         s, o, rank = s[keep], o[keep], rank[keep]
         usable = ~shapely.intersects(obstacles.hulls[o], where[s])
         s, o, rank = s[usable], o[usable], rank[usable]
-        verts = obstacles.vertex_table[o] - pts[s][:, None, :]
-        centre = verts.mean(axis=1)
+        if len(s) == 0:
+            return
+        # One row per (pair, vertex of the pair's obstacle), reduced per pair (ragged).
+        flat, offsets = obstacles.vertices
+        sizes = offsets[o + 1] - offsets[o]
+        first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        pair = np.repeat(np.arange(len(s)), sizes)
+        vertex = offsets[o][pair] + np.arange(len(pair)) - first[pair]
+        verts = flat[vertex] - pts[s][pair]
+        centre = np.add.reduceat(verts, first, axis=0) / sizes[:, None]
         ref_s = np.arctan2(centre[:, 1], centre[:, 0])
-        ang = np.arctan2(verts[..., 1], verts[..., 0]) - ref_s[:, None]
+        ang = np.arctan2(verts[:, 1], verts[:, 0]) - ref_s[pair]
         ang = np.mod(ang + math.pi, 2.0 * math.pi) - math.pi
-        far = np.hypot(verts[..., 0], verts[..., 1]).max(axis=1)
+        far = np.maximum.reduceat(np.hypot(verts[:, 0], verts[:, 1]), first)
         self._shadow[index[s], rank] = np.column_stack(
-            [ref_s, ang.min(axis=1), ang.max(axis=1), far]
+            [ref_s, np.minimum.reduceat(ang, first), np.maximum.reduceat(ang, first), far]
         )
 
     def _append(self, sources, src, dst, unit, length) -> None:

@@ -114,17 +114,30 @@ class Obstacles:
             hit[rest] = shapely.dwithin(geom, lines[rest], distance)
         return hit.reshape(segments.shape[:-2])
 
+    def points_within(self, points: np.ndarray, distance: float) -> np.ndarray:
+        """True for each point (..., 2) within `distance` (inclusive) of an obstacle or
+        inside a solid one; vectorised over the prepared union of the obstacles."""
+        points = np.asarray(points, float)
+        flat = points.reshape(-1, 2)
+        hit = np.zeros(len(flat), bool)
+        if len(flat) == 0 or len(self) == 0:
+            return hit.reshape(points.shape[:-1])
+        where = shapely.points(flat)
+        for geom in self._prepared_union:
+            rest = np.flatnonzero(~hit)
+            hit[rest] = shapely.dwithin(geom, where[rest], distance)
+        return hit.reshape(points.shape[:-1])
+
     @cached_property
-    def vertex_table(self) -> np.ndarray:
-        """Vertices of every obstacle, (G, V, 2), padded by repeating the last vertex
-        (polygons first, then walls, as in `geometries`)."""
+    def vertices(self) -> tuple[np.ndarray, np.ndarray]:
+        """Vertices of every obstacle, flat: (points (P, 2), offsets (G + 1,)); obstacle g
+        owns points[offsets[g]:offsets[g + 1]] (polygons first, then walls, as in
+        `geometries`). Memory grows with the vertex count, not with the largest obstacle."""
         rings = list(self.polygons) + list(self.walls)
         if not rings:
-            return np.zeros((0, 1, 2))
-        sizes = np.array([len(r) for r in rings])
-        offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        index = offsets[:, None] + np.minimum(np.arange(sizes.max()), sizes[:, None] - 1)
-        return np.concatenate(rings)[index]
+            return np.zeros((0, 2)), np.zeros(1, np.intp)
+        sizes = np.array([len(r) for r in rings], np.intp)
+        return np.concatenate(rings), np.concatenate([[0], np.cumsum(sizes)])
 
     @cached_property
     def hulls(self) -> np.ndarray:

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,6 +67,7 @@ from planner.validity import (
 
 __all__ = [
     "Refusal",
+    "SearchProgress",
     "check_path",
     "check_rows",
     "plan_path",
@@ -77,13 +79,18 @@ __all__ = [
 #: taut graph (used first) and the full graph (the fallback, with more but flatter nodes).
 LOCAL_CANDIDATES = 250
 LOCAL_CANDIDATES_FULL = 150
-#: Largest graph (nodes) on which a taut path found under binding constraints is checked
-#: against the full graph (DESIGN 3.3: the taut graph is exact only when nothing binds).
-FULL_CHECK_NODES = 3000
 #: Repair search: partial walks kept per directed edge (DESIGN 3.3, next-shortest walks).
 _LABELS_PER_STATE = 8
 #: At most this many fleet-size rounds (N only grows; rows lengthen each round).
 MAX_FLEET_ROUNDS = 12
+#: Weight of the heuristic in the quick repair search (weighted A*), which finds a valid
+#: path fast for the exact repair search to be bounded by (and to return if stopped).
+QUICK_REPAIR_WEIGHT = 1.5
+#: The caller's progress callback is asked whether to stop every this many expansions.
+_POLL_EVERY = 64
+#: Certification: at most this many nodes in the ellipse |Av| + |vB| < L of the path found
+#: (L its length) get complete candidate sets (every pair examined) to prove it shortest.
+CERTIFY_NODES = 12000
 
 
 # ---------------------------------------------------------------------------------------
@@ -159,12 +166,86 @@ class _RowFilter:
 
 @dataclass
 class _Budget:
+    """The expansion cap, and the caller's stop request (`poll`, asked every
+    `_POLL_EVERY` expansions: True stops every search at once)."""
+
     limit: int
     used: int = 0
+    floor: float = 0.0  # the current search's proven lower bound (f of its last state)
+    best: float = math.inf  # length of the shortest valid path found so far
+    poll: Callable[[int], bool] | None = None
+    stopped: bool = False
+    _next_poll: int = 0
 
     @property
     def spent(self) -> bool:
-        return self.used >= self.limit
+        if self.stopped or self.used >= self.limit:
+            return True
+        if self.poll is not None and self.used >= self._next_poll:
+            self._next_poll = self.used + _POLL_EVERY
+            self.stopped = bool(self.poll(self.used))
+        return self.stopped
+
+
+@dataclass(frozen=True)
+class SearchProgress:
+    """What a running plan tells its `progress` callback: states expanded so far, the
+    shortest valid path found so far (nan before the first) and the best proven lower bound
+    on the shortest valid path (m)."""
+
+    expansions: int
+    best_length_m: float
+    lower_bound_m: float
+
+
+def goal_distance(cache: EdgeCache, budget: _Budget) -> np.ndarray:
+    """The search heuristic: a lower bound on each node's distance to B over the cache's
+    edges with the row, parking-angle and bend rules ignored (a relaxation, so it never
+    overestimates a valid walk). An A* runs backwards from B towards A (key: distance to B
+    plus the straight line to A) until it settles A at the unconstrained length L; the nodes
+    it settled get their exact distance, the others max(straight line to B, L - straight
+    line to A), which no path from them can beat (their key is at least L). The result is
+    consistent (it never drops by more than an edge's length along an edge), so the searches
+    may relax each edge once. Edges are symmetric (clearance and tangency are tested at both
+    ends), so a node's out-edges are its in-edges; A is no target, so its own out-edges are
+    read once. Settled nodes count against `max_expansions`. Computed once per cache."""
+    if cache.goal_distance is not None:
+        return cache.goal_distance
+    pts = cache.nodes.points
+    to_goal = np.hypot(*(pts - pts[GOAL]).T)
+    to_start = np.hypot(*(pts - pts[START]).T)
+    dist = np.full(len(pts), math.inf)
+    settled = np.zeros(len(pts), bool)
+    lo, hi = cache.edges(START)
+    from_start = dict(zip(cache.dst[lo:hi].tolist(), cache.length[lo:hi].tolist(), strict=True))
+    dist[GOAL] = 0.0
+    heap = [(float(to_start[GOAL]), GOAL)]
+    reach = float(to_start[GOAL])  # every unsettled node has dist + to_start >= reach
+    while heap:
+        key, w = heapq.heappop(heap)
+        if settled[w]:
+            continue
+        settled[w] = True
+        reach = key
+        if w == START or budget.spent:
+            break
+        budget.used += 1
+        d = float(dist[w])
+        step = from_start.get(w)
+        if step is not None and d + step < dist[START]:
+            dist[START] = d + step
+            heapq.heappush(heap, (d + step, START))
+        lo, hi = cache.edges(w)
+        v = cache.dst[lo:hi]
+        nd = d + cache.length[lo:hi]
+        better = nd < dist[v]
+        v, nd = v[better], nd[better]
+        dist[v] = nd
+        for node, value in zip(v.tolist(), (nd + to_start[v]).tolist(), strict=True):
+            heapq.heappush(heap, (value, node))
+    bound = np.maximum(to_goal, reach - to_start)
+    cache.goal_distance = np.where(settled, dist, bound)
+    return cache.goal_distance
 
 
 def _walk_search(
@@ -174,9 +255,8 @@ def _walk_search(
     conditions (1)-(4), "found") or (None, "exhausted" | "cap" | "bound"); "bound" when
     no such walk is shorter than `bound`."""
     nodes = cache.nodes
-    pts = nodes.points
-    heuristic = np.hypot(*(pts - pts[GOAL]).T)
-    heap: list[tuple[float, int, float, int]] = []
+    heuristic = goal_distance(cache, budget)
+    heap: list[tuple[float, float, int, float, int]] = []
     pred: dict[int, int] = {}
     remaining: dict[int, np.ndarray] = {}
     left: dict[int, int] = {}  # out-edges of a node not relaxed yet
@@ -219,12 +299,13 @@ def _walk_search(
                 continue  # every out-edge of w is already relaxed from a cheaper state
             pred[e] = edge_in
             tick += 1
-            heapq.heappush(heap, (f, tick, c, e))
+            heapq.heappush(heap, (f, -c, tick, c, e))
 
     budget.used += 1
     expand(START, -1, 0.0)
     while heap:
-        f, _, g, e = heapq.heappop(heap)
+        f, _, _, g, e = heapq.heappop(heap)
+        budget.floor = max(budget.floor, f)
         if f >= bound:
             return None, "bound"
         w = int(cache.dst[e])
@@ -248,6 +329,7 @@ def _label_search(
     rows: _RowFilter,
     budget: _Budget,
     bound: float = math.inf,
+    weight: float = 1.0,
 ) -> tuple[np.ndarray | None, str]:
     """Repair of conditions (5) and definition 1: enumerate partial walks in order of
     f = g + h (labels), up to `_LABELS_PER_STATE` per directed edge, extending a label only
@@ -257,7 +339,7 @@ def _label_search(
     (status "found" or "found-capped"); otherwise (None, "exhausted" | "capped" | "cap")."""
     nodes = cache.nodes
     pts = nodes.points
-    heuristic = np.hypot(*(pts - pts[GOAL]).T)
+    heuristic = goal_distance(cache, budget)
     limit = 2.0 * problem.safety_margin - DISTANCE_TOLERANCE
     floor = -math.sin(ANGLE_TOLERANCE)
     # label fields: edge, g, open segment start (node), closed segments (linked tuples)
@@ -265,7 +347,7 @@ def _label_search(
     lab_g: list[float] = []
     lab_open: list[int] = []
     lab_closed: list[tuple | None] = []
-    heap: list[tuple[float, int]] = []
+    heap: list[tuple[float, float, int]] = []
     settled: dict[int, int] = {}
     saturated = False
 
@@ -275,7 +357,8 @@ def _label_search(
             lab_g.append(c)
             lab_open.append(o)
             lab_closed.append(closed)
-            heapq.heappush(heap, (c + float(heuristic[cache.dst[e]]), len(lab_edge) - 1))
+            f = c + weight * float(heuristic[cache.dst[e]])
+            heapq.heappush(heap, (f, -c, len(lab_edge) - 1))
 
     def closed_array(closed) -> np.ndarray:
         out = []
@@ -289,11 +372,15 @@ def _label_search(
     budget.used += 1
     push(first, cache.length[first], np.full(len(first), START), None)
     while heap:
-        f, label = heapq.heappop(heap)
-        if f >= bound:
+        f, _, label = heapq.heappop(heap)
+        if not saturated and weight == 1.0:  # a dropped label may hide a path as short as f
+            budget.floor = max(budget.floor, f)
+        if f >= bound and weight == 1.0:
             return None, "bound"
         e = lab_edge[label]
         v = int(cache.dst[e])
+        if lab_g[label] + float(heuristic[v]) >= bound:
+            continue  # (weighted search) cannot beat the bound
         if v == GOAL:
             segs = closed_array(lab_closed[label])[::-1]
             idx = np.concatenate([segs[:, 0], [lab_open[label], GOAL]]).astype(np.int64)
@@ -434,6 +521,7 @@ class _LevelResult:
     status: str
     violations: PathViolations | None = None
     certified: bool = False
+    lower_bound: float = 0.0  # proven lower bound on the shortest valid path (m)
 
 
 def _exact_level(
@@ -452,7 +540,17 @@ def _exact_level(
     first = check_path(path, problem, rows.rows)
     if first.ok:
         return _LevelResult(path, 1, 0, "found", first)
+    # A quick repair first (weighted A*: greedy towards B), so a stopped search still has a
+    # valid path; then the exact repair, bounded by it.
+    quick, _ = _label_search(problem, cache, rows, budget, bound, weight=QUICK_REPAIR_WEIGHT)
+    if quick is not None:
+        bound = min(bound, _length(quick) - DISTANCE_TOLERANCE)
+        budget.best = min(budget.best, _length(quick))
     path, status = _label_search(problem, cache, rows, budget, bound)
+    if path is None and quick is not None:
+        # the exact search proved nothing shorter (bound, exhausted) or was cut (cap, capped)
+        path = quick
+        status = "found" if status in ("bound", "exhausted") else "found-capped"
     if path is None:
         status = {"cap": "cap", "capped": "repair-capped", "bound": "bound"}.get(status, "repair")
         return _LevelResult(None, 2, 1, status, first)
@@ -537,7 +635,7 @@ def _diagnose(problem: PathProblem, cache: EdgeCache, rows: _RowFilter, budget: 
     departure = _reaches_goal(cache, rows, budget, departure=False)
     arrival = _reaches_goal(cache, rows, budget, arrival=False)
     if budget.spent:
-        return _cap_reason(problem)
+        return _cap_reason(problem, budget)
     if departure:
         return (
             "every route needs a sharp bend at departure: the first segment of every route "
@@ -560,7 +658,7 @@ def _diagnose(problem: PathProblem, cache: EdgeCache, rows: _RowFilter, budget: 
             "and the row beyond B (eq. 35); change theta_A/theta_B or the fleet size"
         )
     if budget.spent:
-        return _cap_reason(problem)
+        return _cap_reason(problem, budget)
     return (
         "B is unreachable from A: the obstacles with their rho_c margins leave no corridor "
         "between them"
@@ -573,7 +671,12 @@ _SEPARATED = (
 )
 
 
-def _cap_reason(problem: PathProblem) -> str:
+def _cap_reason(problem: PathProblem, budget: _Budget | None = None) -> str:
+    if budget is not None and budget.stopped:
+        return (
+            f"the search was stopped (time limit) after {budget.used} expansions without "
+            "finding a valid path"
+        )
     return (
         f"the search stopped at its cap of {problem.max_expansions} expansions "
         "(max_expansions) without finding a valid path"
@@ -588,10 +691,21 @@ def _cap_reason(problem: PathProblem) -> str:
 class _Planner:
     """Holds the nodes and edge caches of one problem across fleet-size rounds."""
 
-    def __init__(self, problem: PathProblem) -> None:
+    def __init__(
+        self, problem: PathProblem, progress: Callable[[SearchProgress], bool] | None = None
+    ) -> None:
         self.problem = problem
+        self.straight = float(np.hypot(*(problem.goal - problem.start)))
+        poll = None
+        if progress is not None:
+
+            def poll(used: int) -> bool:
+                best = self.budget.best
+                bound = min(max(self.straight, self.budget.floor), best)
+                return progress(SearchProgress(used, best if best < math.inf else math.nan, bound))
+
+        self.budget = _Budget(problem.max_expansions, poll=poll)
         self.nodes = graph_nodes(problem)
-        self.budget = _Budget(problem.max_expansions)
         self._caches: dict[str, EdgeCache] = {}
 
     def cache(self, level: str) -> EdgeCache:
@@ -636,43 +750,63 @@ class _Planner:
             full = _exact_level(self.problem, self.cache("full"), rows_filter, self.budget)
             if full.path is not None:
                 full.certified = full.status == "found" and self.cache("full").radius is None
+                full.lower_bound = _length(full.path) if full.certified else self.straight
                 return full, "full", None
             taut = full
         return taut, "full", self._why(taut, rows_filter, "full")
 
+    def certify_cache(self, length: float) -> EdgeCache | None:
+        """The full graph of definition 5 inside the ellipse |Av| + |vB| < `length` (no
+        shorter path leaves it), with complete candidate sets; None when the ellipse holds
+        more than `CERTIFY_NODES` nodes."""
+        pts = self.nodes.points
+        detour = np.hypot(*(pts - pts[START]).T) + np.hypot(*(pts - pts[GOAL]).T)
+        if np.count_nonzero(detour < length + DISTANCE_TOLERANCE) > CERTIFY_NODES:
+            return None
+        self._caches["certify"] = EdgeCache(
+            self.problem, self.nodes, taut=False, prune_collinear=True, within=length
+        )
+        return self._caches["certify"]
+
     def _certify(self, taut: _LevelResult, rows: _RowFilter) -> tuple[_LevelResult, str, None]:
-        """The taut graph holds the shortest path when no constraint binds: its length then
-        equals the unconstrained shortest path (rows, parking angles and bends ignored),
-        which the full graph cannot beat. Otherwise search the full graph for a shorter
-        valid path (A* bounded by the taut length), when the map is small enough. A proof
-        needs complete candidate sets (no radius-limited edges)."""
+        """Prove the taut path shortest, or find a shorter one. The taut graph holds the
+        shortest path when no constraint binds: with complete candidate sets, its length then
+        equals the unconstrained shortest path (the heuristic's value at A), which no valid
+        path can beat. Otherwise the full graph of definition 5 inside the ellipse of the taut
+        length L (`certify_cache`) is searched for a valid path shorter than L: the shortest
+        is certified, and if there is none the taut path is. A search cut short (cap or stop
+        request) leaves the last f it reached as the proven lower bound."""
         length = _length(taut.path)
         taut_cache = self.cache("taut")
-        if taut_cache.radius is not None and len(self.nodes) > FULL_CHECK_NODES:
-            return taut, "taut", None  # nothing could be proven on this graph
-        walk, _ = _node_search(
-            taut_cache, rows, self.budget, departure=False, arrival=False, row_tests=False
-        )
-        if walk is not None:
-            free = _length(_walk_points(taut_cache, walk)[0])
-            if length <= free * (1.0 + 1e-12) + DISTANCE_TOLERANCE:
-                taut.certified = taut.status == "found" and taut_cache.radius is None
+        taut.lower_bound = self.straight
+        free = float(goal_distance(taut_cache, self.budget)[START])
+        if taut_cache.radius is None and not self.budget.spent:
+            taut.lower_bound = max(self.straight, min(free, length))
+            if taut.status == "found" and length <= free * (1.0 + 1e-12) + DISTANCE_TOLERANCE:
+                taut.certified = True
                 return taut, "taut", None
-        if len(self.nodes) > FULL_CHECK_NODES or self.budget.spent:
+        self.budget.best = min(self.budget.best, length)
+        if self.budget.spent:
             return taut, "taut", None
-        full_cache = self.cache("full")
-        bound = length - DISTANCE_TOLERANCE
-        full = _exact_level(self.problem, full_cache, rows, self.budget, bound)
-        complete = full_cache.radius is None
+        full_cache = self.certify_cache(length)
+        if full_cache is None:
+            return taut, "taut", None
+        self.budget.floor = 0.0
+        full = _exact_level(
+            self.problem, full_cache, rows, self.budget, length - DISTANCE_TOLERANCE
+        )
         if full.path is not None:
-            full.certified = full.status == "found" and complete
+            full.certified = full.status == "found"
+            full.lower_bound = _length(full.path) if full.certified else taut.lower_bound
             return full, "full", None
-        taut.certified = full.status == "bound" and taut.status == "found" and complete
+        taut.certified = full.status in ("bound", "exhausted", "repair")
+        floor = length if taut.certified else min(self.budget.floor, length)
+        taut.lower_bound = max(taut.lower_bound, floor)
         return taut, "taut", None
 
     def _why(self, result: _LevelResult, rows: _RowFilter, level: str) -> str:
         if result.status == "cap" or self.budget.spent:
-            return _cap_reason(self.problem)
+            return _cap_reason(self.problem, self.budget)
         what = result.violations.describe() if result.violations else None
         if result.status == "repair" and level == "penalty":
             return (
@@ -705,8 +839,15 @@ def _rows(problem: PathProblem, fleet_size: int) -> ParkingRows:
     )
 
 
-def plan_path(problem: PathProblem) -> PathPlan:
+def plan_path(
+    problem: PathProblem, progress: Callable[[SearchProgress], bool] | None = None
+) -> PathPlan:
     """Plan a valid path (definition 4) from A to B, or say why there is none.
+
+    `progress`, when given, is called every few dozen expansions with a `SearchProgress`;
+    returning True stops the search: the plan is then the shortest valid path found so far
+    (`stopped`, not certified) or, with none found yet, invalid. The planner has no clock:
+    a time limit is the caller's `progress`.
 
     With finite rows ("segment"), N starts at the straight-line bound (or the given fleet
     size), and the path is planned again while it needs more UAVs than the rows were sized
@@ -723,7 +864,7 @@ def plan_path(problem: PathProblem) -> PathPlan:
     size = max(problem.fleet_size or 1, lower)
     if reason is not None:
         return _invalid(problem, reason, size, lower, _rows(problem, size))
-    planner = _Planner(problem)
+    planner = _Planner(problem, progress)
     for fleet_round in range(1, MAX_FLEET_ROUNDS + 1):
         rows = _rows(problem, size)
         reason = check_rows(problem, rows)
@@ -766,6 +907,8 @@ def plan_path(problem: PathProblem) -> PathPlan:
                 repairs=result.repairs,
                 fleet_rounds=fleet_round,
                 edge_count=sum(c.size for c in planner._caches.values()),
+                lower_bound_m=length if result.certified else min(result.lower_bound, length),
+                stopped=planner.budget.stopped,
             )
         size = need
     return _invalid(
@@ -806,4 +949,5 @@ def _invalid(
         level="",
         repairs=result.repairs if result else 0,
         fleet_rounds=fleet_round,
+        stopped=planner.budget.stopped if planner else False,
     )

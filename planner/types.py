@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,7 +58,10 @@ class PathPlan:
     skipped on a large map or the repair search hit its label limit). `node_count` counts
     graph nodes, `edges_examined` the node pairs considered, `edge_count` the edges found
     valid against the obstacles (`candidate_edges`, for plots), `expansions` the states taken
-    off the queues; `fleet_rounds` the fleet sizes tried."""
+    off the queues; `fleet_rounds` the fleet sizes tried. `lower_bound_m` is a proven lower
+    bound on the shortest valid path (equal to `length_m` when certified; at least the
+    straight line A-B); `stopped` says the caller's progress callback stopped the search (the
+    path is then the best found so far)."""
 
     valid: bool
     reason: str | None
@@ -77,3 +81,5 @@ class PathPlan:
     repairs: int = 0
     fleet_rounds: int = 1
     edge_count: int = 0
+    lower_bound_m: float = math.nan
+    stopped: bool = False

@@ -21,6 +21,7 @@ from planner.formation import (
     min_radio_range,
     parking_rows,
 )
+from planner.numbers import fmt_against
 
 if TYPE_CHECKING:
     from planner.types import PathProblem
@@ -39,6 +40,8 @@ class PathViolations:
     `proximity` [segment k, segment k', distance] for |k - k'| > 1 (5). Segments and vertices
     are 0-based (segment k joins path[k] and path[k+1]). `structure` lists breaches of
     definition 1 (ends not at A and B, repeated points, fewer than two points).
+    `safety_margin` (rho_c) is the limit the distances broke: `describe` prints them with the
+    digits that tell them from it.
     """
 
     structure: tuple[str, ...] = ()
@@ -49,6 +52,7 @@ class PathViolations:
     arrival_angle_deg: float | None = None  # set when (3) fails at B
     bends: np.ndarray = field(default_factory=lambda: _empty(2))
     proximity: np.ndarray = field(default_factory=lambda: _empty(3))
+    safety_margin: float = math.nan
 
     @property
     def ok(self) -> bool:
@@ -65,33 +69,46 @@ class PathViolations:
 
     def describe(self) -> str | None:
         """One sentence naming the first breach, or None when the path is valid."""
+        rho = self.safety_margin
         if self.structure:
             return self.structure[0]
         if len(self.obstacle):
             k, i, d = self.obstacle[0]
-            return f"segment {int(k)} passes {d:.3g} m from obstacle {int(i)} (condition 1)"
+            return (
+                f"segment {int(k)} passes {fmt_against(d, rho)} m from obstacle {int(i)} "
+                "(condition 1)"
+            )
         if len(self.start_row):
             k, d = self.start_row[0]
-            return f"segment {int(k)} passes {d:.3g} m from the parking row at A (condition 2)"
+            return (
+                f"segment {int(k)} passes {fmt_against(d, 2 * rho)} m from the parking row at A "
+                "(condition 2)"
+            )
         if len(self.goal_row):
             k, d = self.goal_row[0]
-            return f"segment {int(k)} passes {d:.3g} m from the parking row at B (condition 2)"
+            return (
+                f"segment {int(k)} passes {fmt_against(d, 2 * rho)} m from the parking row at B "
+                "(condition 2)"
+            )
         if self.departure_angle_deg is not None:
             return (
-                f"the first segment turns {self.departure_angle_deg:.4g} degrees from the "
-                "start row direction (condition 3)"
+                f"the first segment turns {fmt_against(self.departure_angle_deg, 90, 4)} degrees "
+                "from the start row direction (condition 3)"
             )
         if self.arrival_angle_deg is not None:
             return (
-                f"the last segment turns {self.arrival_angle_deg:.4g} degrees from the "
-                "goal row direction (condition 3)"
+                f"the last segment turns {fmt_against(self.arrival_angle_deg, 90, 4)} degrees "
+                "from the goal row direction (condition 3)"
             )
         if len(self.bends):
             k, a = self.bends[0]
-            return f"the path bends {a:.4g} degrees at point {int(k)} (condition 4)"
+            return f"the path bends {fmt_against(a, 90, 4)} degrees at point {int(k)} (condition 4)"
         if len(self.proximity):
             k, j, d = self.proximity[0]
-            return f"segments {int(k)} and {int(j)} come {d:.3g} m apart (condition 5)"
+            return (
+                f"segments {int(k)} and {int(j)} come {fmt_against(d, 2 * rho)} m apart "
+                "(condition 5)"
+            )
         return None
 
 
@@ -167,6 +184,7 @@ def check_path(path: np.ndarray, problem: PathProblem, rows: ParkingRows) -> Pat
         arrival_angle_deg=math.degrees(arrival) if arrival > right else None,
         bends=bends,
         proximity=proximity,
+        safety_margin=rho,
     )
 
 
@@ -225,10 +243,11 @@ def row_refusal(problem: PathProblem, rows: ParkingRows) -> Refusal | None:
         )
         if dist[0] < rho - DISTANCE_TOLERANCE:
             length = float(np.hypot(*(row[1] - row[0])))
+            d = float(dist[0])
             message = (
-                f"the parking row {where} ({length:.4g} m) comes {float(dist[0]):.3g} m from "
-                f"obstacle {int(nearest[0])}; it must stay at least rho_c = {rho:g} m away "
-                "(eq. 14)"
+                f"the parking row {where} ({length:.4g} m) comes {fmt_against(d, rho)} m from "
+                f"obstacle {int(nearest[0])}; it must stay at least rho_c = "
+                f"{fmt_against(rho, d, 6)} m away (eq. 14)"
             )
             return Refusal(subject, message, int(nearest[0]), float(dist[0]))
     gap = float(
@@ -236,8 +255,8 @@ def row_refusal(problem: PathProblem, rows: ParkingRows) -> Refusal | None:
     )
     if gap < 2.0 * rho - DISTANCE_TOLERANCE:
         message = (
-            f"the parking rows behind A and beyond B are {gap:.3g} m apart; they must be at "
-            f"least 2 rho_c = {2 * rho:g} m apart (eq. 15)"
+            f"the parking rows behind A and beyond B are {fmt_against(gap, 2 * rho)} m apart; "
+            f"they must be at least 2 rho_c = {fmt_against(2 * rho, gap, 6)} m apart (eq. 15)"
         )
         return Refusal("rows", message, None, gap)
     return None
@@ -259,8 +278,8 @@ def _endpoint_refusal(problem: PathProblem, point: np.ndarray, subject: str) -> 
         return Refusal(subject, f"{where} lies inside obstacle {nearest}", nearest, dist)
     if dist < rho - DISTANCE_TOLERANCE:
         message = (
-            f"{where} is {dist:.3g} m from obstacle {nearest}, inside its safety margin "
-            f"rho_c = {rho:g} m"
+            f"{where} is {fmt_against(dist, rho)} m from obstacle {nearest}, inside its safety "
+            f"margin rho_c = {fmt_against(rho, dist, 6)} m"
         )
         return Refusal(subject, message, nearest, dist)
     return None
@@ -277,10 +296,11 @@ def precheck_issue(problem: PathProblem, fleet_size: int | None = None) -> Refus
         return Refusal("inputs", "A, B, rho_c and rho_R must be finite numbers")
     if rho <= 0:
         return Refusal("safety_margin", f"the safety margin rho_c must be > 0, got {rho:g}")
-    if radio < min_radio_range(rho) - DISTANCE_TOLERANCE:
+    needed = min_radio_range(rho)
+    if radio < needed - DISTANCE_TOLERANCE:
         message = (
-            f"the radio range rho_R = {radio:g} m is below 2(1+sqrt 2) rho_c = "
-            f"{min_radio_range(rho):.4g} m (eq. 9)"
+            f"the radio range rho_R = {fmt_against(radio, needed, 6)} m is below "
+            f"2(1+sqrt 2) rho_c = {fmt_against(needed, radio, 4)} m (eq. 9)"
         )
         return Refusal("radio_range", message)
     straight = float(np.hypot(*(problem.goal - problem.start)))

@@ -3,6 +3,10 @@
 Each command group lives in its own module `gcs/cli/cmd_<group>.py` exposing
 `register(subparsers)`: it adds its parser(s) and sets `handler=func` on each leaf, where
 `func(args) -> int` returns the exit status. Adding a group is one line in `GROUPS`.
+Every group is imported at start-up (to build the parser), so a group module imports at its
+top only what planning needs anyway (the mission, the planner, rich); the flight stack
+(pymavlink, drivers, core), MCAP and matplotlib are imported inside the handlers that use
+them (tests/test_startup.py checks `gcs mission plan` imports none of them).
 
 Exit statuses (CONTRACTS.md): 0 success, 1 the command ran and failed (no valid path, mission
 aborted...), 2 bad input. Bad input (`InputError`, argparse usage errors) is one line on

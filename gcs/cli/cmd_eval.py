@@ -15,10 +15,10 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from gcs.cli.outputs import output_folder
 from gcs.errors import InputError
-from gcs.mission import load_mission
-from gcs.sim.eval import DEFAULT_MISSION, EvalPlan, run_all, write_figures, write_results
+
+# The command's modules (matplotlib, the fast simulator) are imported when it runs, not when
+# `gcs` starts: every other command would pay for them.
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -40,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     paper.add_argument("--out", type=Path, default=Path("eval"), metavar="DIR",
                        help="output folder (default ./eval)")  # fmt: skip
-    paper.add_argument("--mission", type=Path, default=DEFAULT_MISSION, metavar="FILE",
+    paper.add_argument("--mission", type=Path, default=None, metavar="FILE",
                        help="scenario (default examples/table-ii.yaml, the paper's Table II)")  # fmt: skip
     paper.add_argument("--speeds", default="2,5,10", metavar="V,...",
                        help="fixed formation speeds, m/s (default 2,5,10)")  # fmt: skip
@@ -61,6 +61,12 @@ def _numbers(flag: str, text: str, kind, positive: bool = True) -> tuple:
 
 
 def paper_command(args: argparse.Namespace) -> int:
+    from gcs.cli.outputs import output_folder
+    from gcs.mission import load_mission
+    from gcs.sim.eval import DEFAULT_MISSION, EvalPlan, run_all, write_figures, write_results
+
+    if args.mission is None:
+        args.mission = DEFAULT_MISSION
     speeds = _numbers("--speeds", args.speeds, float)
     leaders = _numbers("--leaders", args.leaders, int)
     if not speeds and not leaders:

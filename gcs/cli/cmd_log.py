@@ -11,14 +11,16 @@ import json
 import math
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.table import Table
 
 from gcs.cli.outputs import output_folder
 from gcs.errors import InputError
-from gcs.logs.logreader import Recording, read_recording
+
+if TYPE_CHECKING:  # the MCAP reader is imported when a command reads a log
+    from gcs.logs.logreader import Recording
 
 EXIT_OK = 0
 
@@ -127,6 +129,8 @@ def _seconds(value: float | None) -> str:
 
 
 def info_command(args: argparse.Namespace) -> int:
+    from gcs.logs.logreader import read_recording
+
     recording = read_recording(args.log, keep=lambda topic: topic in ("/plan", "/metrics"))
     data = describe(recording)
     if args.json:
@@ -169,6 +173,7 @@ def info_command(args: argparse.Namespace) -> int:
 
 # --------------------------------------------------------------------------- report
 def report_command(args: argparse.Namespace) -> int:
+    from gcs.logs.logreader import read_recording
     from gcs.logs.report import write_report
 
     out = output_folder(args.out, "--out")
@@ -194,6 +199,7 @@ def _metres(value: float | None) -> str:
 
 # --------------------------------------------------------------------------- replay
 def replay_command(args: argparse.Namespace) -> int:
+    from gcs.logs.logreader import read_recording
     from gcs.logs.replay import ReplayError, open_output, recorded_frames, replay
 
     if not (math.isfinite(args.rate) and args.rate > 0):

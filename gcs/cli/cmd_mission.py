@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -16,8 +17,11 @@ from rich.console import Console
 from rich.table import Table
 
 from gcs.cli.outputs import output_path, write_output
+from gcs.errors import InputError, RowsRefused
 from gcs.mission import load_mission
 from gcs.planning import MissionPlan, plan_json, plan_mission
+from planner.search import SearchProgress
+from planner.types import PathPlan, PathProblem
 
 #: Modules adding `gcs mission <command>`, each with `register(mission_subparsers)`.
 SUBCOMMANDS: tuple[str, ...] = ("gcs.cli.cmd_run",)
@@ -44,6 +48,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_planning_arguments(check)
     check.add_argument("--json", action="store_true", help="print the plan JSON on stdout")
+    check.add_argument(
+        "--near",
+        type=float,
+        metavar="R",
+        help="when A (or B) or its parking row is refused, also name the nearest accepted "
+        "start (or goal) point within R metres",
+    )
     check.set_defaults(handler=check_command)
 
     plan = commands.add_parser(
@@ -85,26 +96,131 @@ def add_planning_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="URL",
         help="MAVLink connection strings, one per UAV (overrides fleet.connections)",
     )
+    parser.add_argument(
+        "--time-limit",
+        type=_seconds,
+        default=DEFAULT_TIME_LIMIT_S,
+        metavar="S",
+        help=f"stop the path search after S seconds with the best valid path found so far "
+        f"(exit 1; default {DEFAULT_TIME_LIMIT_S:g})",
+    )
+
+
+#: Default `--time-limit` of the path search, seconds.
+DEFAULT_TIME_LIMIT_S = 60.0
+#: Without a terminal, a long search prints one progress line this often (seconds).
+PROGRESS_EVERY_S = 10.0
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return value
 
 
 def plan_from_args(args: argparse.Namespace) -> MissionPlan:
-    """Load and plan `args.file` with the shared planning options."""
+    """Load and plan `args.file` with the shared planning options; a search that runs for
+    more than a second shows its progress on stderr (a status line on a terminal, else a
+    line every `PROGRESS_EVERY_S` seconds)."""
     mission = load_mission(args.file)
-    return plan_mission(
-        mission,
-        cap_speed=args.cap_speed,
-        connections=tuple(args.connect) if args.connect else None,
-        method=args.method,
+    console = Console(stderr=True, highlight=False)
+    status = None
+    shown = [0.0]
+
+    def on_progress(state: SearchProgress, elapsed: float) -> None:
+        nonlocal status
+        if elapsed < 1.0:
+            return
+        text = progress_text(state, elapsed)
+        if console.is_terminal:
+            if status is None:
+                status = console.status(text)
+                status.start()
+            status.update(text)
+        elif elapsed - shown[0] >= PROGRESS_EVERY_S:
+            shown[0] = elapsed
+            console.print(text, soft_wrap=True)
+
+    try:
+        return plan_mission(
+            mission,
+            cap_speed=args.cap_speed,
+            connections=tuple(args.connect) if args.connect else None,
+            method=args.method,
+            time_limit_s=args.time_limit,
+            on_progress=on_progress,
+        )
+    finally:
+        if status is not None:
+            status.stop()
+
+
+def progress_text(state: SearchProgress, elapsed: float) -> str:
+    """One line of search progress: time, expansions, best path and lower bound."""
+    best = "none yet" if math.isnan(state.best_length_m) else f"{state.best_length_m:,.1f} m"
+    return (
+        f"planning: {elapsed:.0f} s, {state.expansions:,} expansions, best valid path "
+        f"{best}, lower bound {state.lower_bound_m:,.1f} m"
+    )
+
+
+def certification_text(pp: PathPlan) -> str:
+    """Whether the path is certified shortest under definition 4, else how far it may be."""
+    if pp.certified:
+        return "certified shortest (definition 4)"
+    gap = pp.length_m - pp.lower_bound_m
+    share = gap / pp.lower_bound_m if pp.lower_bound_m > 0 else math.inf
+    why = "stopped at the time limit; " if pp.stopped else ""
+    return (
+        f"not certified shortest: {why}at most {gap:,.1f} m ({share:.1%}) longer than the "
+        f"shortest (lower bound {pp.lower_bound_m:,.1f} m)"
     )
 
 
 def check_command(args: argparse.Namespace) -> int:
-    plan = plan_from_args(args)
+    from planner.alternatives import suggest  # only when a refusal needs it
+
+    near = getattr(args, "near", None)
+    if near is not None and not (math.isfinite(near) and near > 0):
+        raise InputError(None, "--near", f"a distance in metres > 0, got {near:g}")
+    try:
+        plan = plan_from_args(args)
+    except InputError as refused:
+        # A refused parking row (eqs. 14-15) or A/B in a margin: say what would be accepted,
+        # on the same line (exit 2 stays one line on stderr and nothing on stdout, CONTRACTS).
+        rows = isinstance(refused, RowsRefused)
+        placed = refused.key_path in ("start", "goal") and near is not None
+        if not (rows or placed) or refused.file != str(args.file):
+            raise
+        try:  # the mission again, without the A/B clearance test, to plan around it
+            mission = load_mission(args.file, check_clearance=False)
+        except InputError:
+            raise refused from None
+        problem = PathProblem(
+            start=mission.start.xy,
+            goal=mission.goal.xy,
+            start_angle_deg=mission.start.theta_deg,
+            goal_angle_deg=mission.goal.theta_deg,
+            safety_margin=mission.safety_margin,
+            radio_range=mission.radio_range,
+            obstacles=mission.obstacles,
+            parking=mission.parking,
+            fleet_size=mission.fleet.size,
+        )
+        found = suggest(problem, refused.fleet_size if rows else None, near)
+        text = found.describe()
+        if text is None:
+            raise refused from None
+        raise InputError(refused.file, refused.key_path, f"{refused.expected}; {text}") from None
     console = Console(stderr=args.json, highlight=False)
     if args.json:
         print(json.dumps(plan_json(plan), allow_nan=False))
     print_summary(console, plan)
-    return EXIT_OK if plan.valid else EXIT_NO_PATH
+    return EXIT_OK if plan.valid and not plan.path_plan.stopped else EXIT_NO_PATH
 
 
 def plan_command(args: argparse.Namespace) -> int:
@@ -126,7 +242,7 @@ def plan_command(args: argparse.Namespace) -> int:
     if args.json:
         print(text)
     print_summary(console, plan, written)
-    return EXIT_OK if plan.valid else EXIT_NO_PATH
+    return EXIT_OK if plan.valid and not plan.path_plan.stopped else EXIT_NO_PATH
 
 
 def print_summary(console: Console, plan: MissionPlan, written: list[Path] | None = None) -> None:
@@ -165,8 +281,9 @@ def print_summary(console: Console, plan: MissionPlan, written: list[Path] | Non
     table.add_row(
         "planning",
         f"{plan.planning_time_s * 1000:.1f} ms, {pp.node_count} nodes, "
-        f"{pp.edges_examined} edges examined, {pp.iterations} iterations",
+        f"{pp.edges_examined} edges examined, {pp.iterations} iterations, {pp.level} graph",
     )
+    table.add_row("shortest", certification_text(pp))
     for path in written or ():
         table.add_row("wrote", str(path))
     console.print(table)

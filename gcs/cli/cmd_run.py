@@ -18,26 +18,21 @@ import time
 from contextlib import ExitStack
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from rich.console import Console
 
-from gcs.drivers import BackendUnavailable, driver_class
-from gcs.drivers.base import DriverTiming, ExternalFleet, UavSpec
-from gcs.drivers.sim import SimFleet, SimVehicleSetup
 from gcs.errors import InputError
-from gcs.flight.clock import MissionClock
-from gcs.flight.core import GroundStation, RunOptions
-from gcs.flight.forward import Forwarder
-from gcs.flight.live import LiveLoop
-from gcs.link import Link
-from gcs.logs.recording import FlightRecorder, LiveServerError
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission, plan_within_limits
-from gcs.signing import RunSigning
-from gcs.sim.radio import medium_setup
-from gcs.speed import OperatorSocket, socket_path_for
-from gcs.summary import EXIT_ABORTED, exit_status, run_json, summary_renderable
+
+# The flight's modules (pymavlink, the drivers and the core, the MCAP recorder) are imported
+# when `gcs mission run` runs, not when `gcs` starts: registering the command needs none of them.
+if TYPE_CHECKING:
+    from gcs.drivers.sim import SimVehicleSetup
+    from gcs.flight.forward import Forwarder
+    from gcs.logs.recording import FlightRecorder
 
 #: Highest setpoint rate the scheduler streams (mission time), Hz.
 MAX_SETPOINT_RATE_HZ = 50.0
@@ -181,6 +176,20 @@ def check_arguments(args: argparse.Namespace) -> None:
 
 
 def run_command(args: argparse.Namespace) -> int:
+    from gcs.drivers import BackendUnavailable, driver_class
+    from gcs.drivers.base import DriverTiming, ExternalFleet, UavSpec
+    from gcs.drivers.sim import SimFleet
+    from gcs.flight.clock import MissionClock
+    from gcs.flight.core import GroundStation, RunOptions
+    from gcs.flight.forward import Forwarder
+    from gcs.flight.live import LiveLoop
+    from gcs.link import Link
+    from gcs.logs.recording import FlightRecorder, LiveServerError
+    from gcs.signing import RunSigning
+    from gcs.sim.radio import medium_setup
+    from gcs.speed import OperatorSocket, socket_path_for
+    from gcs.summary import EXIT_ABORTED, exit_status, run_json, summary_renderable
+
     check_arguments(args)
     mission = load_mission(args.file)
     rate = mission.sim.setpoint_rate_hz
@@ -357,6 +366,8 @@ def run_command(args: argparse.Namespace) -> int:
 def sim_setup(mission, formation, args, leaders, log_path: Path) -> SimVehicleSetup:
     """The simulated fleet of `mission`: homes on the parking slots at A, the mission's
     vehicle limits, wind and navigation noise, leaders and speedup."""
+    from gcs.drivers.sim import SimVehicleSetup
+
     noise = mission.sim.noise
     direction = math.radians(noise.wind_direction_deg)
     return SimVehicleSetup(

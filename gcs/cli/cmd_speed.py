@@ -15,7 +15,6 @@ import sys
 from pathlib import Path
 
 from gcs.errors import InputError
-from gcs.speed import find_running_sockets, send_operator_request, socket_path_for
 
 EXIT_OK, EXIT_REFUSED = 0, 1
 
@@ -53,6 +52,8 @@ def _number(text: str, flag: str, minimum: float | None = None) -> float:
 
 
 def speed_command(args: argparse.Namespace) -> int:
+    from gcs.speed import find_running_sockets, send_operator_request, socket_path_for
+
     speed = _number(args.speed, "V", 0.0)
     at = None if args.at is None else _number(args.at, "--at")
     if args.socket is not None:

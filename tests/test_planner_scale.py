@@ -1,0 +1,140 @@
+"""The planner at city scale (issue 13): the goal-distance heuristic, certification inside
+the ellipse of the path found, stop requests with the best path so far, lower bounds, and
+memory that follows the vertex count."""
+
+from __future__ import annotations
+
+import math
+
+import networkx as nx
+import numpy as np
+import pytest
+
+import planner.search as search
+from planner.graph import GOAL, START, EdgeCache, graph_nodes
+from planner.obstacles import Obstacles
+from planner.scenarios import city_grid, random_buildings, scenario_problem
+from planner.search import SearchProgress, goal_distance, plan_path
+from planner.validity import check_path
+from tests.planner_maps import problem, square
+
+
+def _complete_graph_distances(cache: EdgeCache) -> dict[int, float]:
+    """Exact distance to B of every node over all of the cache's edges (networkx)."""
+    graph = nx.DiGraph()
+    for v in cache.members:
+        lo, hi = cache.edges(int(v))
+        for e in range(lo, hi):
+            graph.add_edge(int(cache.src[e]), int(cache.dst[e]), weight=float(cache.length[e]))
+    return nx.single_source_dijkstra_path_length(graph.reverse(), GOAL)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_goal_distance_never_overestimates_and_is_consistent(seed):
+    prob = scenario_problem(random_buildings(40, seed=seed, size=800.0))
+    nodes = graph_nodes(prob)
+    cache = EdgeCache(prob, nodes, taut=True, prune_collinear=True)
+    h = goal_distance(cache, search._Budget(10**9))
+    exact = _complete_graph_distances(cache)
+    reached = np.array(sorted(exact))
+    assert np.all(h[reached] <= np.array([exact[v] for v in reached]) + 1e-6)
+    assert h[START] == pytest.approx(exact[START])  # A settled: the unconstrained length
+    # consistent along every edge: h(v) <= |vw| + h(w)
+    size = cache.size
+    assert np.all(h[cache.src[:size]] <= cache.length[:size] + h[cache.dst[:size]] + 1e-6)
+
+
+def test_certified_where_complete_candidates_agree():
+    prob = scenario_problem(city_grid(12, 10, block=40.0, street=16.0))
+    plan = plan_path(prob)
+    assert plan.valid and plan.certified and plan.lower_bound_m == plan.length_m
+    # the same map with complete candidate sets everywhere gives the same length
+    old = search.LOCAL_CANDIDATES, search.LOCAL_CANDIDATES_FULL
+    try:
+        search.LOCAL_CANDIDATES = search.LOCAL_CANDIDATES_FULL = 10**6
+        complete = plan_path(prob)
+    finally:
+        search.LOCAL_CANDIDATES, search.LOCAL_CANDIDATES_FULL = old
+    assert complete.valid
+    assert plan.length_m == pytest.approx(complete.length_m, abs=1e-6)
+
+
+@pytest.fixture(scope="module")
+def dense():
+    """A map whose taut graph is radius-limited (> 4 x 250 targets)."""
+    prob = scenario_problem(random_buildings(400, seed=1, size=1500.0))
+    cache = EdgeCache(
+        prob, graph_nodes(prob), taut=True, prune_collinear=True, local_candidates=250
+    )
+    assert cache.radius is not None
+    return prob
+
+
+def test_certified_inside_the_ellipse_on_a_radius_limited_map(dense):
+    plan = plan_path(dense)
+    assert plan.valid and plan.certified and plan.lower_bound_m == plan.length_m
+
+
+def test_without_room_to_certify_the_bound_is_the_straight_line(dense):
+    old = search.CERTIFY_NODES
+    try:
+        search.CERTIFY_NODES = 10
+        plan = plan_path(dense)
+    finally:
+        search.CERTIFY_NODES = old
+    assert plan.valid and not plan.certified
+    straight = float(np.hypot(*(dense.goal - dense.start)))
+    assert plan.lower_bound_m == pytest.approx(straight)
+    assert plan.lower_bound_m < plan.length_m
+
+
+def _stop_after(polls: int):
+    seen: list[SearchProgress] = []
+
+    def progress(state: SearchProgress) -> bool:
+        seen.append(state)
+        return len(seen) >= polls
+
+    return progress, seen
+
+
+def test_a_stop_request_before_any_path_gives_an_invalid_plan_that_says_so():
+    prob = scenario_problem(city_grid(12, 10, block=40.0, street=16.0))
+    progress, seen = _stop_after(1)
+    plan = plan_path(prob, progress)
+    assert not plan.valid and plan.stopped
+    assert "stopped" in plan.reason and "time limit" in plan.reason
+    assert math.isnan(seen[0].best_length_m)
+
+
+def test_a_stop_request_after_a_path_returns_it_marked_not_certified(dense):
+    full = plan_path(dense)
+    # stop as soon as a valid path is known (during certification)
+    plan = plan_path(dense, lambda state: not math.isnan(state.best_length_m))
+    assert plan.valid and plan.stopped and not plan.certified
+    assert check_path(plan.path, dense, plan.rows).ok
+    assert plan.lower_bound_m <= full.length_m + 1e-6 <= plan.length_m + 1e-6
+
+
+def test_progress_reports_grow_and_bound_the_answer():
+    prob = scenario_problem(random_buildings(60, seed=4, size=1000.0))
+    seen: list[SearchProgress] = []
+    plan = plan_path(prob, lambda s: seen.append(s) or False)
+    assert plan.valid and not plan.stopped and seen
+    expansions = [s.expansions for s in seen]
+    assert expansions == sorted(expansions)
+    assert all(s.lower_bound_m <= plan.length_m + 1e-6 for s in seen)
+
+
+def test_vertices_are_stored_flat_whatever_the_largest_polygon():
+    ring = np.column_stack([np.cos(np.linspace(0, 2 * math.pi, 400, endpoint=False))] * 2)
+    ring[:, 1] = np.sin(np.linspace(0, 2 * math.pi, 400, endpoint=False))
+    big = 100.0 * ring + [500.0, 500.0]
+    small = [square(20.0 * k, -100.0, 5.0) for k in range(50)]
+    obstacles = Obstacles(polygons=(big, *small))
+    points, offsets = obstacles.vertices
+    assert points.shape == (400 + 50 * 4, 2)
+    assert offsets[-1] == len(points) and np.all(np.diff(offsets) == [400] + [4] * 50)
+    prob = problem([300.0, 300.0], [700.0, 700.0], obstacles)
+    plan = plan_path(prob)
+    assert plan.valid and check_path(plan.path, prob, plan.rows).ok

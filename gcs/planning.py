@@ -42,6 +42,7 @@ from planner.kinematics import (
     safe_speed,
     smoothing_error_bound,
 )
+from planner.numbers import fmt_against, plural
 from planner.search import SearchProgress, plan_path
 from planner.types import PathPlan, PathProblem
 from planner.validity import row_refusal
@@ -187,10 +188,11 @@ def plan_mission(
             raise InputError(
                 mission.source,
                 "speed.max",
-                f"at most the safe formation speed {safe:.3g} m/s that the path's bends allow "
+                f"at most the safe formation speed {fmt_against(safe, speeds.max)} m/s that the "
+                "path's bends allow "
                 f"with vehicle.max_acceleration {mission.vehicle.max_acceleration:g} m/s^2 and "
                 f"a smoothing budget of {mission.error_budget:.3g} m (DESIGN 3.5), got "
-                f"{speeds.max:g}; lower it, raise vehicle.max_acceleration, or set "
+                f"{fmt_against(speeds.max, safe, 6)}; lower it, raise vehicle.max_acceleration, or set "
                 "speed.cap_to_safe: true (--cap-speed)",
             )
         speeds = _cap(speeds, safe)
@@ -219,13 +221,14 @@ def check_rows(mission: Mission, problem: PathProblem, rows: ParkingRows, fleet_
         return
     rho = mission.safety_margin
     length = (fleet_size - 1) * collision_spacing(rho) + rho
-    size = "" if mission.parking == "ray" else f", {length:.4g} m for {fleet_size} UAVs"
+    size = "" if mission.parking == "ray" else f", {length:.4g} m for {plural(fleet_size, 'UAV')}"
     if refusal.subject == "rows":
         raise RowsRefused(
             mission.source,
             "goal.theta_deg",
-            f"parking rows at least 2 x safety_margin = {2 * rho:g} m apart (eq. 15); the rows "
-            f"behind start and beyond goal{size} are {refusal.distance:.3g} m apart",
+            f"parking rows at least 2 x safety_margin = {fmt_against(2 * rho, refusal.distance, 6)} "
+            f"m apart (eq. 15); the rows behind start and beyond goal{size} are "
+            f"{fmt_against(refusal.distance, 2 * rho)} m apart",
             fleet_size,
         )
     key, where = {
@@ -235,9 +238,10 @@ def check_rows(mission: Mission, problem: PathProblem, rows: ParkingRows, fleet_
     raise RowsRefused(
         mission.source,
         f"{key}.theta_deg",
-        f"a parking row ({where}{size}) at least safety_margin = {rho:g} m from "
-        f"every obstacle (eq. 14); {mission.obstacle_keys[refusal.obstacle]} is "
-        f"{refusal.distance:.3g} m from it",
+        f"a parking row ({where}{size}) at least safety_margin = "
+        f"{fmt_against(rho, refusal.distance, 6)} m from every obstacle (eq. 14); "
+        f"{mission.obstacle_keys[refusal.obstacle]} is {fmt_against(refusal.distance, rho)} m "
+        "from it",
         fleet_size,
     )
 
@@ -333,7 +337,8 @@ def _check_fleet_size(mission: Mission, fixed: int, minimum: int, what: str) -> 
         raise InputError(
             mission.source,
             "fleet.size",
-            f"auto or at least {minimum} UAVs, the minimum of eq. 28 for {what}, got {fixed}",
+            f"auto or at least {plural(minimum, 'UAV')}, the minimum of eq. 28 for {what}, "
+            f"got {fixed}",
         )
 
 

@@ -45,11 +45,13 @@ GOAL = 1  #: index of B in `Nodes`
 KIND_START, KIND_GOAL, KIND_ROW, KIND_OBSTACLE = 0, 1, 2, 3
 
 #: Candidate pairs per batch when out-edges are computed tile by tile.
-_BATCH_PAIRS = 20000
+_BATCH_PAIRS = 6000
 #: Nearest obstacles of a source node whose angular shadows cull candidate targets.
 _OCCLUDERS = 12
 #: Octant completion: each node gets at least this many candidate targets per octant.
 _OCTANT_MIN = 2
+#: ... and at most this many within the candidate radius (the nearest ones).
+_OCTANT_MAX = 48
 
 
 @dataclass(frozen=True, eq=False)
@@ -294,8 +296,11 @@ def edge_ok(problem: PathProblem, rows, starts: np.ndarray, ends: np.ndarray) ->
 class EdgeCache:
     """Obstacle-clear out-edges of graph nodes, computed on demand per spatial tile.
 
-    `within` keeps only the nodes inside the ellipse |Av| + |vB| < within: every path shorter
-    than `within` lies in it, so a search bounded by `within` loses nothing.
+    `within` keeps only the nodes inside the ellipse |Av| + |vB| < within, and the edges v->w
+    with |Av| + |vw| + |wB| < within (or w->v: edges stay symmetric): every path shorter than
+    `within` uses only those, so a
+    search bounded by `within` loses nothing (and distances to B over them stay exact for
+    every node of such a path, so the heuristic stays admissible).
 
     Edges are numbered in the order they are computed; `src`, `dst`, `length`, `direction`
     (unit) and `penalty` (extra weight, for the repair loops) are indexed by edge number.
@@ -321,10 +326,13 @@ class EdgeCache:
             member = (nodes.kind <= KIND_GOAL) | ((nodes.kind == KIND_OBSTACLE) & ~nodes.flat)
         else:
             member = np.ones(count, bool)
+        self.within = within
         if within is not None:
             # Only nodes a path shorter than `within` can visit: |Av| + |vB| < within.
             pts = nodes.points
-            detour = np.hypot(*(pts - pts[START]).T) + np.hypot(*(pts - pts[GOAL]).T)
+            self._to_start = np.hypot(*(pts - pts[START]).T)
+            self._to_goal = np.hypot(*(pts - pts[GOAL]).T)
+            detour = self._to_start + self._to_goal
             member &= (nodes.kind <= KIND_GOAL) | (detour < within + DISTANCE_TOLERANCE)
         self.members = np.flatnonzero(member)
         self.targets = self.members[self.members != START]
@@ -411,7 +419,16 @@ class EdgeCache:
         where = shapely.points(pts[sources])
         i, j = self._target_tree.query(where, predicate="dwithin", distance=self.radius)
         src, dst = sources[i], self.targets[j]
-        octant = _octant(pts[dst] - pts[src])
+        rel = pts[dst] - pts[src]
+        octant = _octant(rel)
+        # Dense districts hold many more targets in the radius than the map's mean: keep the
+        # nearest `_OCTANT_MAX` per octant (farther ones are mostly hidden behind them).
+        if len(i) > _OCTANT_MAX * 8 * len(sources):
+            order = np.lexsort((np.hypot(rel[:, 0], rel[:, 1]), i * 8 + octant))
+            group = (i * 8 + octant)[order]
+            rank = np.arange(len(order)) - np.searchsorted(group, group, side="left")
+            keep = np.sort(order[rank < _OCTANT_MAX])
+            i, src, dst, octant = i[keep], src[keep], dst[keep], octant[keep]
         have = np.bincount(i * 8 + octant, minlength=8 * len(sources)).reshape(-1, 8)
         row, oct_ = np.nonzero(have < _OCTANT_MIN)
         if len(row) == 0:
@@ -453,6 +470,11 @@ class EdgeCache:
         d = pts[dst] - pts[src]
         length = np.hypot(d[:, 0], d[:, 1])
         keep = length > DISTANCE_TOLERANCE
+        if self.within is not None:  # and only edges such a path can use: |Av|+|vw|+|wB|
+            # (either way round: the edges stay symmetric, as the heuristic's search needs)
+            ahead = self._to_start[src] + self._to_goal[dst]
+            back = self._to_start[dst] + self._to_goal[src]
+            keep &= np.minimum(ahead, back) + length < self.within + DISTANCE_TOLERANCE
         if self.taut:
             keep &= tangent(nodes, src, d) & tangent(nodes, dst, d)
         idx = np.flatnonzero(keep)
@@ -478,10 +500,12 @@ class EdgeCache:
         clearance test."""
         if len(self.problem.obstacles) == 0 or len(src) == 0:
             return np.zeros(len(src), bool)
-        self._ensure_shadows(np.unique(np.concatenate([src, dst])))
+        self._ensure_shadows(np.unique(src))
         angle = np.arctan2(d[:, 1], d[:, 0])
         blocked = self._in_shadow(src, angle, length)
-        rest = ~blocked
+        # The far end's shadows only where they are known already (computing them for every
+        # target of a tile costs more than the exact test they would spare).
+        rest = np.flatnonzero(~blocked & self._shadow_done[dst])
         blocked[rest] = self._in_shadow(dst[rest], angle[rest] + math.pi, length[rest])
         return blocked
 

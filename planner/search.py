@@ -55,6 +55,7 @@ from planner.graph import (
     segments_clear_of_rows,
     wraps_corner,
 )
+from planner.numbers import plural
 from planner.types import PathPlan, PathProblem
 from planner.validity import (
     PathViolations,
@@ -560,6 +561,11 @@ def _exact_level(
     return _LevelResult(path, 2, 1, "found" if status == "found" else "found-capped", final)
 
 
+def _at_most(bound: float) -> float:
+    """`bound` with the tolerance of a length comparison (relative 1e-12, plus 1e-9 m)."""
+    return bound * (1.0 + 1e-12) + DISTANCE_TOLERANCE
+
+
 def _length(path: np.ndarray) -> float:
     return float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
 
@@ -755,37 +761,43 @@ class _Planner:
             taut = full
         return taut, "full", self._why(taut, rows_filter, "full")
 
-    def certify_cache(self, length: float) -> EdgeCache | None:
-        """The full graph of definition 5 inside the ellipse |Av| + |vB| < `length` (no
-        shorter path leaves it), with complete candidate sets; None when the ellipse holds
-        more than `CERTIFY_NODES` nodes."""
+    def certify_cache(self, length: float, taut: bool = False) -> EdgeCache | None:
+        """The full graph of definition 5 (or the taut graph) inside the ellipse
+        |Av| + |vB| < `length` (no shorter path leaves it), with complete candidate sets; None
+        when the ellipse holds more than `CERTIFY_NODES` nodes."""
         pts = self.nodes.points
         detour = np.hypot(*(pts - pts[START]).T) + np.hypot(*(pts - pts[GOAL]).T)
         if np.count_nonzero(detour < length + DISTANCE_TOLERANCE) > CERTIFY_NODES:
             return None
-        self._caches["certify"] = EdgeCache(
-            self.problem, self.nodes, taut=False, prune_collinear=True, within=length
+        key = "certify-taut" if taut else "certify"
+        self._caches[key] = EdgeCache(
+            self.problem, self.nodes, taut=taut, prune_collinear=True, within=length
         )
-        return self._caches["certify"]
+        return self._caches[key]
 
     def _certify(self, taut: _LevelResult, rows: _RowFilter) -> tuple[_LevelResult, str, None]:
-        """Prove the taut path shortest, or find a shorter one. The taut graph holds the
-        shortest path when no constraint binds: with complete candidate sets, its length then
-        equals the unconstrained shortest path (the heuristic's value at A), which no valid
-        path can beat. Otherwise the full graph of definition 5 inside the ellipse of the taut
-        length L (`certify_cache`) is searched for a valid path shorter than L: the shortest
-        is certified, and if there is none the taut path is. A search cut short (cap or stop
-        request) leaves the last f it reached as the proven lower bound."""
+        """Prove the taut path shortest, or find a shorter one. A valid path as short as the
+        unconstrained shortest path over complete candidate sets (the heuristic's value at A,
+        rows, angles and bends ignored) is the shortest: no valid path can beat it. The taut
+        graph gives that value, with complete candidate sets (inside the ellipse of the taut
+        length when the map is large: unconstrained shortest paths are taut). Otherwise the full graph
+        of definition 5 inside the ellipse of the taut length L (`certify_cache`), which holds
+        every path shorter than L, is searched for a valid path shorter than L: the one found
+        is certified if the search was exhaustive or it meets that value, and if there is
+        none the taut path is. A search cut short (cap or stop request) leaves the best
+        proven lower bound: that value, or the last f the bounded search reached."""
         length = _length(taut.path)
+        self.budget.best = min(self.budget.best, length)
         taut_cache = self.cache("taut")
         taut.lower_bound = self.straight
-        free = float(goal_distance(taut_cache, self.budget)[START])
-        if taut_cache.radius is None and not self.budget.spent:
+        if taut_cache.radius is not None:  # complete candidate sets inside the ellipse
+            taut_cache = self.certify_cache(length, taut=True)
+        if taut_cache is not None:
+            free = float(goal_distance(taut_cache, self.budget)[START])
             taut.lower_bound = max(self.straight, min(free, length))
-            if taut.status == "found" and length <= free * (1.0 + 1e-12) + DISTANCE_TOLERANCE:
+            if length <= _at_most(free):
                 taut.certified = True
                 return taut, "taut", None
-        self.budget.best = min(self.budget.best, length)
         if self.budget.spent:
             return taut, "taut", None
         full_cache = self.certify_cache(length)
@@ -795,13 +807,16 @@ class _Planner:
         full = _exact_level(
             self.problem, full_cache, rows, self.budget, length - DISTANCE_TOLERANCE
         )
+        free = float(goal_distance(full_cache, self.budget)[START])
+        floor = max(taut.lower_bound, min(free, length), min(self.budget.floor, length))
         if full.path is not None:
-            full.certified = full.status == "found"
-            full.lower_bound = _length(full.path) if full.certified else taut.lower_bound
+            found = _length(full.path)
+            full.certified = full.status == "found" or found <= _at_most(free)
+            full.lower_bound = found if full.certified else min(floor, found)
             return full, "full", None
-        taut.certified = full.status in ("bound", "exhausted", "repair")
-        floor = length if taut.certified else min(self.budget.floor, length)
-        taut.lower_bound = max(taut.lower_bound, floor)
+        exhaustive = full.status in ("bound", "exhausted", "repair")
+        taut.certified = exhaustive or length <= _at_most(free)
+        taut.lower_bound = length if taut.certified else floor
         return taut, "taut", None
 
     def _why(self, result: _LevelResult, rows: _RowFilter, level: str) -> str:
@@ -869,13 +884,14 @@ def plan_path(
         rows = _rows(problem, size)
         reason = check_rows(problem, rows)
         if reason is not None:
-            reason = f"the path needs {size} UAVs (eq. 28), and with {size} UAVs {reason}"
+            uavs = plural(size, "UAV")
+            reason = f"the path needs {uavs} (eq. 28), and with {uavs} {reason}"
             return _invalid(problem, reason, size, lower, rows, planner, fleet_round)
         result, level, reason = planner.solve(rows)
         if result.path is None:
             if fleet_round > 1 and problem.parking == "segment":
                 reason = (
-                    f"{reason} (with the parking rows sized for the {size} UAVs that the "
+                    f"{reason} (with the parking rows sized for the {plural(size, 'UAV')} that the "
                     "shorter routes need, eq. 28)"
                 )
             return _invalid(problem, reason, size, lower, rows, planner, fleet_round, result)

@@ -20,6 +20,7 @@ from gcs.cli.outputs import output_path, write_output
 from gcs.errors import InputError, RowsRefused
 from gcs.mission import load_mission
 from gcs.planning import MissionPlan, plan_json, plan_mission
+from planner.numbers import plural
 from planner.search import SearchProgress
 from planner.types import PathPlan, PathProblem
 
@@ -264,7 +265,9 @@ def print_summary(console: Console, plan: MissionPlan, written: list[Path] | Non
     table.add_column("")
     table.add_row("path", _path_text(pp.path))
     table.add_row("length", f"{pp.length_m:.1f} m ({len(pp.path)} points)")
-    table.add_row("fleet size", f"{pp.fleet_size} UAVs (minimum {pp.min_fleet_size}, eq. 28)")
+    table.add_row(
+        "fleet size", f"{plural(pp.fleet_size, 'UAV')} (minimum {pp.min_fleet_size}, eq. 28)"
+    )
     table.add_row("duration", f"{plan.duration_s:.1f} s")
     capped = " (capped)" if plan.speed_capped else ""
     table.add_row(

@@ -86,7 +86,7 @@ _LABELS_PER_STATE = 8
 MAX_FLEET_ROUNDS = 12
 #: Weight of the heuristic in the quick repair search (weighted A*), which finds a valid
 #: path fast for the exact repair search to be bounded by (and to return if stopped).
-QUICK_REPAIR_WEIGHT = 1.5
+QUICK_REPAIR_WEIGHT = 1.2
 #: The caller's progress callback is asked whether to stop every this many expansions.
 _POLL_EVERY = 64
 #: Certification: at most this many nodes in the ellipse |Av| + |vB| < L of the path found

@@ -71,3 +71,60 @@ def test_time_limit_must_be_a_positive_number(value, gcs_main):
     result = gcs_main("mission", "check", HELSINKI, "--time-limit", value)
     assert result.returncode == 2
     assert "--time-limit" in result.stderr and "positive number of seconds" in result.stderr
+
+
+MESSY = {
+    "type": "FeatureCollection",
+    "features": [
+        {"type": "Feature", "properties": {}, "geometry": {"type": "Point", "coordinates": [0, 0]}},
+        {
+            "type": "Feature",
+            "properties": {},
+            "geometry": {
+                "type": "Polygon",
+                "coordinates": [
+                    [
+                        [-0.00031, -0.00005],
+                        [-0.00018, -0.00005],
+                        [-0.00018, 0.00005],
+                        [-0.00031, 0.00005],
+                        [-0.00031, -0.00005],
+                    ]
+                ],
+            },
+        },
+    ],
+}
+
+
+def _messy_mission(tmp_path, goal_x: float) -> str:
+    (tmp_path / "messy.geojson").write_text(json.dumps(MESSY))
+    path = tmp_path / "m.yaml"
+    path.write_text(
+        "version: 1\nname: messy\norigin: {lat: 0.0, lon: 0.0, alt: 0.0}\n"
+        f"start: {{x: 0, y: 0, theta_deg: 0}}\ngoal: {{x: {goal_x}, y: 0, theta_deg: 0}}\n"
+        "safety_margin: 5\nradio_range: 40\naltitude: 20\nspeed: {max: 3}\n"
+        "fleet: {size: auto, backend: sim}\n"
+        "vehicle: {max_speed: 12, max_acceleration: 8, radius: 0.5}\n"
+        "obstacles:\n  - geojson: messy.geojson\n"
+    )
+    return str(path)
+
+
+def _footprint_warnings(caplog) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.name == "gcs.footprints"]
+
+
+def test_footprint_warnings_wait_for_the_input_to_be_accepted(tmp_path, gcs_main, caplog):
+    # the row behind A (many UAVs for a long path) reaches the footprint: refused, exit 2,
+    # and the footprint file's warning is not printed beside the one-line refusal
+    caplog.set_level("WARNING")
+    refused = gcs_main("mission", "check", _messy_mission(tmp_path, 300))
+    assert refused.returncode == 2 and "theta_deg" in refused.stderr
+    assert _footprint_warnings(caplog) == []
+    caplog.clear()
+    # a short mission whose rows clear it: accepted, and the warning is printed
+    accepted = gcs_main("mission", "check", _messy_mission(tmp_path, 30))
+    assert accepted.returncode == 0, accepted.stderr
+    warnings = _footprint_warnings(caplog)
+    assert len(warnings) == 1 and "skipped 1 (features[0] Point)" in warnings[0]

@@ -58,14 +58,44 @@ def build_parser() -> ArgumentParser:
     return parser
 
 
+#: Loggers whose warnings wait until the input is accepted: a refusal (exit 2) stays one line.
+DEFERRED_LOGGERS = ("gcs.footprints",)
+
+
+class _Deferred(logging.Handler):
+    """Holds the warnings of `DEFERRED_LOGGERS` until `print_held()`: a command calls it (as
+    `args.release_warnings()`) once its input is accepted; `main` calls it when a command
+    returns, and drops them on a refusal."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+    def print_held(self) -> None:
+        records, self.records = self.records, []
+        for record in records:
+            logging.getLogger().handle(record)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Parse `argv`, run the chosen command, return its exit status."""
     parser = build_parser()
+    deferred = _Deferred()
+    held = [logging.getLogger(name) for name in DEFERRED_LOGGERS]
+    for logger in held:
+        logger.addHandler(deferred)
+        logger.propagate = False
     try:
         args = parser.parse_args(argv)
         level = (logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)]
         logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
-        return int(args.handler(args))
+        args.release_warnings = deferred.print_held
+        status = int(args.handler(args))
+        deferred.print_held()
+        return status
     except InputError as exc:
         print(exc, file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -80,3 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
+    finally:
+        for logger in held:
+            logger.removeHandler(deferred)
+            logger.propagate = True

@@ -147,7 +147,7 @@ def plan_from_args(args: argparse.Namespace) -> MissionPlan:
             console.print(text, soft_wrap=True)
 
     try:
-        return plan_mission(
+        plan = plan_mission(
             mission,
             cap_speed=args.cap_speed,
             connections=tuple(args.connect) if args.connect else None,
@@ -158,6 +158,8 @@ def plan_from_args(args: argparse.Namespace) -> MissionPlan:
     finally:
         if status is not None:
             status.stop()
+    getattr(args, "release_warnings", lambda: None)()  # the input is accepted
+    return plan
 
 
 def progress_text(state: SearchProgress, elapsed: float) -> str:

@@ -211,7 +211,9 @@ def run_command(args: argparse.Namespace) -> int:
         cap_speed=args.cap_speed,
         connections=tuple(args.connect) if args.connect else None,
         method=args.method,
+        time_limit_s=args.time_limit,
     )
+    getattr(args, "release_warnings", lambda: None)()  # the input is accepted
     console = Console(stderr=True, highlight=False) if args.json else Console(highlight=False)
     if not plan.valid:
         if args.json:

@@ -85,6 +85,23 @@ class MissionPlan:
         return int(self.path_plan.fleet_size)
 
 
+def mission_problem(mission: Mission, method: str = "exact") -> PathProblem:
+    """The planner's problem for `mission`: A, B, angles, margins, obstacles, parking mode
+    and fixed fleet size (None with `fleet.size: auto`)."""
+    return PathProblem(
+        start=mission.start.xy,
+        goal=mission.goal.xy,
+        start_angle_deg=mission.start.theta_deg,
+        goal_angle_deg=mission.goal.theta_deg,
+        safety_margin=mission.safety_margin,
+        radio_range=mission.radio_range,
+        obstacles=mission.obstacles,
+        parking=mission.parking,
+        fleet_size=mission.fleet.size,
+        method=method,
+    )
+
+
 def plan_mission(
     mission: Mission,
     *,
@@ -124,18 +141,7 @@ def plan_mission(
         mission.safety_margin,
         mission.parking,
     )
-    problem = PathProblem(
-        start=mission.start.xy,
-        goal=mission.goal.xy,
-        start_angle_deg=mission.start.theta_deg,
-        goal_angle_deg=mission.goal.theta_deg,
-        safety_margin=mission.safety_margin,
-        radio_range=mission.radio_range,
-        obstacles=mission.obstacles,
-        parking=mission.parking,
-        fleet_size=fixed,
-        method=method,
-    )
+    problem = mission_problem(mission, method)
     check_rows(mission, problem, first_rows, fixed or lower)
     began = clock()
 

@@ -186,9 +186,10 @@ def tangent(nodes: Nodes, index: np.ndarray, direction: np.ndarray) -> np.ndarra
     the mitre corner the node goes round: the direction is not strictly inside the corner's
     cone nor its opposite. Always True for nodes without a single corner."""
     cone = nodes.cone[index]
-    along_a = np.einsum("ki,ki->k", direction, cone[:, 0])
-    along_b = np.einsum("ki,ki->k", direction, cone[:, 1])
-    eps = ANGLE_TOLERANCE * np.hypot(direction[:, 0], direction[:, 1])
+    dx, dy = direction[:, 0], direction[:, 1]
+    along_a = dx * cone[:, 0, 0] + dy * cone[:, 0, 1]
+    along_b = dx * cone[:, 1, 0] + dy * cone[:, 1, 1]
+    eps = ANGLE_TOLERANCE * np.hypot(dx, dy)
     inside = (along_a > eps) & (along_b > eps)
     opposite = (along_a < -eps) & (along_b < -eps)
     return ~nodes.prunable[index] | ~(inside | opposite)
@@ -475,8 +476,9 @@ class EdgeCache:
             ahead = self._to_start[src] + self._to_goal[dst]
             back = self._to_start[dst] + self._to_goal[src]
             keep &= np.minimum(ahead, back) + length < self.within + DISTANCE_TOLERANCE
-        if self.taut:
-            keep &= tangent(nodes, src, d) & tangent(nodes, dst, d)
+        if self.taut:  # at the source, then at the far end of the pairs left
+            keep[keep] = tangent(nodes, src[keep], d[keep])
+            keep[keep] = tangent(nodes, dst[keep], d[keep])
         idx = np.flatnonzero(keep)
         if self.prune_collinear and len(idx):
             # Before the clearance tests: if v->w is clear, so is its part v->x.

@@ -87,6 +87,10 @@ MAX_FLEET_ROUNDS = 12
 #: Weight of the heuristic in the quick repair search (weighted A*), which finds a valid
 #: path fast for the exact repair search to be bounded by (and to return if stopped).
 QUICK_REPAIR_WEIGHT = 1.2
+#: Large maps: the first ellipse searched with complete candidate sets is |Av| + |vB| <
+#: ELLIPSE_START x |AB|; it grows by ELLIPSE_GROWTH while it holds no valid path.
+ELLIPSE_START = 1.15
+ELLIPSE_GROWTH = 1.2
 #: The caller's progress callback is asked whether to stop every this many expansions.
 _POLL_EVERY = 64
 #: Certification: at most this many nodes in the ellipse |Av| + |vB| < L of the path found
@@ -713,6 +717,7 @@ class _Planner:
         self.budget = _Budget(problem.max_expansions, poll=poll)
         self.nodes = graph_nodes(problem)
         self._caches: dict[str, EdgeCache] = {}
+        self._retired: list[EdgeCache] = []
 
     def cache(self, level: str) -> EdgeCache:
         if level not in self._caches:
@@ -744,9 +749,12 @@ class _Planner:
             if result.path is not None:
                 return result, "penalty", None
             return result, "penalty", self._why(result, rows_filter, "penalty")
+        found = self._ellipse_search(rows_filter) if self.cache("taut").radius else None
+        if found is not None:
+            return self._certify(*found, rows_filter)
         taut = _exact_level(self.problem, self.cache("taut"), rows_filter, self.budget)
         if taut.path is not None:
-            return self._certify(taut, rows_filter)
+            return self._certify(taut, self.cache("taut"), rows_filter)
         problem = self.problem
         if taut.status == "exhausted" and problem.obstacles.separated(
             problem.start, problem.goal, problem.safety_margin - DISTANCE_TOLERANCE
@@ -761,6 +769,25 @@ class _Planner:
             taut = full
         return taut, "full", self._why(taut, rows_filter, "full")
 
+    def _ellipse_search(self, rows: _RowFilter) -> tuple[_LevelResult, EdgeCache] | None:
+        """On a map too large for complete candidate sets: the taut graph with every pair
+        examined inside the ellipse |Av| + |vB| < L, searched for a valid path shorter than L,
+        L from `ELLIPSE_START` x |AB| growing by `ELLIPSE_GROWTH` until one is found. None when
+        the ellipse outgrows `CERTIFY_NODES` nodes (or the budget is spent): the
+        radius-limited taut graph is searched instead."""
+        length = self.straight * ELLIPSE_START
+        while not self.budget.spent:
+            cache = self.certify_cache(length, taut=True)
+            if cache is None:
+                return None
+            result = _exact_level(self.problem, cache, rows, self.budget, length)
+            if result.path is not None:
+                return result, cache
+            if result.status == "cap":
+                return None
+            length *= ELLIPSE_GROWTH
+        return None
+
     def certify_cache(self, length: float, taut: bool = False) -> EdgeCache | None:
         """The full graph of definition 5 (or the taut graph) inside the ellipse
         |Av| + |vB| < `length` (no shorter path leaves it), with complete candidate sets; None
@@ -770,12 +797,16 @@ class _Planner:
         if np.count_nonzero(detour < length + DISTANCE_TOLERANCE) > CERTIFY_NODES:
             return None
         key = "certify-taut" if taut else "certify"
+        if key in self._caches:  # kept alive: row filters key their masks by id(cache)
+            self._retired.append(self._caches[key])
         self._caches[key] = EdgeCache(
             self.problem, self.nodes, taut=taut, prune_collinear=True, within=length
         )
         return self._caches[key]
 
-    def _certify(self, taut: _LevelResult, rows: _RowFilter) -> tuple[_LevelResult, str, None]:
+    def _certify(
+        self, taut: _LevelResult, taut_cache: EdgeCache, rows: _RowFilter
+    ) -> tuple[_LevelResult, str, None]:
         """Prove the taut path shortest, or find a shorter one. A valid path as short as the
         unconstrained shortest path over complete candidate sets (the heuristic's value at A,
         rows, angles and bends ignored) is the shortest: no valid path can beat it. The taut
@@ -788,7 +819,6 @@ class _Planner:
         proven lower bound: that value, or the last f the bounded search reached."""
         length = _length(taut.path)
         self.budget.best = min(self.budget.best, length)
-        taut_cache = self.cache("taut")
         taut.lower_bound = self.straight
         if taut_cache.radius is not None:  # complete candidate sets inside the ellipse
             taut_cache = self.certify_cache(length, taut=True)

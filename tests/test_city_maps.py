@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from gcs.mission import load_mission
-from gcs.planning import plan_json, plan_mission
-from planner.types import PathProblem
+from gcs.planning import mission_problem, plan_json, plan_mission
 from planner.validity import check_path
 from tests.conftest import EXAMPLES
 
@@ -21,18 +20,6 @@ HELSINKI = EXAMPLES / "helsinki-centre.yaml"
 @pytest.fixture(scope="module")
 def helsinki():
     return load_mission(HELSINKI)
-
-
-def _problem(mission) -> PathProblem:
-    return PathProblem(
-        start=mission.start.xy,
-        goal=mission.goal.xy,
-        start_angle_deg=mission.start.theta_deg,
-        goal_angle_deg=mission.goal.theta_deg,
-        safety_margin=mission.safety_margin,
-        radio_range=mission.radio_range,
-        obstacles=mission.obstacles,
-    )
 
 
 def test_helsinki_example_is_planned_certified_and_valid(helsinki, gcs_main):
@@ -45,7 +32,7 @@ def test_helsinki_example_is_planned_certified_and_valid(helsinki, gcs_main):
     assert plan["map"]["used"] + plan["map"]["below_altitude"] == 446
     # checked again, independently of the search, against every footprint kept
     path = np.array(plan["path"])
-    problem = _problem(helsinki)
+    problem = mission_problem(helsinki)
     mission_plan = plan_mission(helsinki)
     assert check_path(path, problem, mission_plan.path_plan.rows).ok
     assert "certified shortest" in result.stderr or "certified shortest" in result.stdout

@@ -17,6 +17,7 @@ from planner.scenarios import city_grid, random_buildings, scenario_problem
 from planner.search import SearchProgress, goal_distance, plan_path
 from planner.validity import check_path
 from tests.planner_maps import problem, square
+from tests.test_planner_search import REPAIR
 
 
 def _complete_graph_distances(cache: EdgeCache) -> dict[int, float]:
@@ -107,12 +108,16 @@ def test_a_stop_request_before_any_path_gives_an_invalid_plan_that_says_so():
     assert math.isnan(seen[0].best_length_m)
 
 
-def test_a_stop_request_after_a_path_returns_it_marked_not_certified(dense):
-    full = plan_path(dense)
-    # stop as soon as a valid path is known (during certification)
-    plan = plan_path(dense, lambda state: not math.isnan(state.best_length_m))
+def test_a_stop_request_after_a_path_returns_it_marked_not_certified(monkeypatch):
+    # The shortest walk breaks condition (5): the quick (weighted) repair finds a valid path,
+    # then the exact repair runs. Asked at every expansion, stop once a path is known.
+    bound = problem(**REPAIR, radio_range=400.0)
+    full = plan_path(bound)
+    assert full.valid and full.certified and full.repairs == 1
+    monkeypatch.setattr(search, "_POLL_EVERY", 1)
+    plan = plan_path(bound, lambda state: not math.isnan(state.best_length_m))
     assert plan.valid and plan.stopped and not plan.certified
-    assert check_path(plan.path, dense, plan.rows).ok
+    assert check_path(plan.path, bound, plan.rows).ok
     assert plan.lower_bound_m <= full.length_m + 1e-6 <= plan.length_m + 1e-6
 
 

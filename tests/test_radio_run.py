@@ -32,14 +32,14 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 #: radio medium itself is the one `gcs mission run` starts).
 LAUNCH = """
 import os, sys
-import gcs.cli, gcs.cli.cmd_run as run
+import gcs.cli, gcs.cli.cmd_mission as planning_cli
 from gcs.sim.fastsim import with_fleet_size
-plan = run.plan_mission
+plan = planning_cli.plan_mission
 def plan_mission(mission, **kwargs):
     p = plan(mission, **kwargs)
     size = os.environ.get("FLEETLINE_TEST_FLEET_SIZE")
     return with_fleet_size(p, int(size)) if size else p
-run.plan_mission = plan_mission
+planning_cli.plan_mission = plan_mission
 sys.exit(gcs.cli.main(sys.argv[1:]))
 """
 

@@ -18,11 +18,11 @@ from rich.table import Table
 
 from gcs.cli.outputs import output_path, write_output
 from gcs.errors import InputError, RowsRefused
-from gcs.mission import load_mission
-from gcs.planning import MissionPlan, plan_json, plan_mission
+from gcs.mission import Mission, load_mission
+from gcs.planning import MissionPlan, mission_problem, plan_json, plan_mission
 from planner.numbers import plural
 from planner.search import SearchProgress
-from planner.types import PathPlan, PathProblem
+from planner.types import PathPlan
 
 #: Modules adding `gcs mission <command>`, each with `register(mission_subparsers)`.
 SUBCOMMANDS: tuple[str, ...] = ("gcs.cli.cmd_run",)
@@ -124,10 +124,14 @@ def _seconds(text: str) -> float:
 
 
 def plan_from_args(args: argparse.Namespace) -> MissionPlan:
-    """Load and plan `args.file` with the shared planning options; a search that runs for
-    more than a second shows its progress on stderr (a status line on a terminal, else a
-    line every `PROGRESS_EVERY_S` seconds)."""
-    mission = load_mission(args.file)
+    """Load and plan `args.file` with the shared planning options (`plan_with_args`)."""
+    return plan_with_args(load_mission(args.file), args)
+
+
+def plan_with_args(mission: Mission, args: argparse.Namespace) -> MissionPlan:
+    """Plan `mission` with the shared planning options; a search that runs for more than a
+    second shows its progress on stderr (a status line on a terminal, else a line every
+    `PROGRESS_EVERY_S` seconds). The input is then accepted: held warnings are printed."""
     console = Console(stderr=True, highlight=False)
     status = None
     shown = [0.0]
@@ -203,17 +207,7 @@ def check_command(args: argparse.Namespace) -> int:
             mission = load_mission(args.file, check_clearance=False)
         except InputError:
             raise refused from None
-        problem = PathProblem(
-            start=mission.start.xy,
-            goal=mission.goal.xy,
-            start_angle_deg=mission.start.theta_deg,
-            goal_angle_deg=mission.goal.theta_deg,
-            safety_margin=mission.safety_margin,
-            radio_range=mission.radio_range,
-            obstacles=mission.obstacles,
-            parking=mission.parking,
-            fleet_size=mission.fleet.size,
-        )
+        problem = mission_problem(mission)
         found = suggest(problem, refused.fleet_size if rows else None, near)
         text = found.describe()
         if text is None:

@@ -25,7 +25,7 @@ from rich.console import Console
 
 from gcs.errors import InputError
 from gcs.mission import load_mission
-from gcs.planning import plan_json, plan_mission, plan_within_limits
+from gcs.planning import plan_json, plan_within_limits
 
 # The flight's modules (pymavlink, the drivers and the core, the MCAP recorder) are imported
 # when `gcs mission run` runs, not when `gcs` starts: registering the command needs none of them.
@@ -206,14 +206,9 @@ def run_command(args: argparse.Namespace) -> int:
         raise InputError(
             mission.source, "fleet.backend", f"a backend this GCS can fly ({error})"
         ) from None
-    plan = plan_mission(
-        mission,
-        cap_speed=args.cap_speed,
-        connections=tuple(args.connect) if args.connect else None,
-        method=args.method,
-        time_limit_s=args.time_limit,
-    )
-    getattr(args, "release_warnings", lambda: None)()  # the input is accepted
+    from gcs.cli.cmd_mission import plan_with_args  # the planning options `run` shares
+
+    plan = plan_with_args(mission, args)
     console = Console(stderr=True, highlight=False) if args.json else Console(highlight=False)
     if not plan.valid:
         if args.json:

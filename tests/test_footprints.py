@@ -23,21 +23,14 @@ from gcs.footprints import (
     parse_height,
     read_footprints,
 )
-from gcs.geodesy import Origin, local_to_lonlat, lonlat_to_local
+from gcs.geodesy import local_to_lonlat, lonlat_to_local
 from gcs.mission import load_mission
+from tests.test_mission import LYON, MINIMAL
 
-LYON = Origin(lat=45.7640, lon=4.8357, alt=170.0)
-MISSION = """\
-version: 1
-origin: {lat: 45.7640, lon: 4.8357, alt: 170}
-start: {x: 0, y: 0}
-goal: {x: 300, y: 100}
-safety_margin: 5
-radio_range: 120
-altitude: 30
-speed: {max: 8}
-obstacles:
-"""
+MISSION = (
+    MINIMAL.replace("version: 1\n", "version: 1\norigin: {lat: 45.7640, lon: 4.8357, alt: 170}\n")
+    + "obstacles:\n"
+)
 
 
 def lonlat(local: list | np.ndarray, close: bool = True) -> list[list[float]]:

@@ -116,6 +116,18 @@ def test_arming_refused_is_reported_and_retried_after_a_back_off():
         assert np.all(gaps >= np.array(backoff) * 0.9), gaps  # never at the tick rate
 
 
+def test_a_vehicle_that_disarms_before_the_take_off_took_is_armed_again():
+    # Every try of the first take-off is lost (a lossy link): ArduCopter disarms after its
+    # DISARM_DELAY on the ground; the driver arms it again and takes off, never failing.
+    model = copter(lost_takeoffs=5, speedup=20.0)
+    with start(model) as flight:
+        take_off(flight, timeout=30.0)
+        assert "disarmed on the ground before the take-off took (the autopilot's disarm " \
+            "delay): arming again" in flight.texts("command")  # fmt: skip
+        assert len(commands(flight, 400)) == 2  # armed twice
+        assert model.flying() and flight.driver.failure_reason is None
+
+
 def sent(flight: Flight, type_name: str, what=lambda m: True) -> list:
     """What the fake sent of one message type (and `what` selects), in order."""
     with flight.fake.lock:

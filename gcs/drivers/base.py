@@ -167,6 +167,8 @@ class Phase(enum.Enum):
 
 #: Phases in which the vehicle is expected to be in its guided/offboard mode.
 GUIDED_PHASES = frozenset({Phase.TAKING_OFF, Phase.FOLLOWING})
+#: Take-offs armed again when the autopilot disarms on the ground before the climb.
+MAX_TAKEOFF_REARMS = 3
 
 #: Phases in which the vehicle is (or may be) in the air.
 AIRBORNE_PHASES = frozenset({Phase.TAKING_OFF, Phase.FOLLOWING, Phase.HOLDING, Phase.LANDING})
@@ -325,6 +327,7 @@ class Driver(ABC):
         self._started: float | None = None
         self._mode_goal: FlightMode | None = None
         self._takeoff_sent = False
+        self._rearms = 0  # take-offs armed again after the autopilot disarmed on the ground
         self._stream_since: float | None = None  # start of the current setpoint streak
         self._last_setpoint: float | None = None
         #: Mission time at a wall time, once the runtime anchored its clock (None before).
@@ -1029,6 +1032,15 @@ class Driver(ABC):
         altitude = self.telemetry.relative_altitude
         if altitude is not None and altitude >= relative - self.takeoff_altitude_tolerance_m:
             self.set_phase(Phase.FOLLOWING, now, f"at {altitude:.1f} m")
+            return
+        if self.telemetry.armed is False and self._rearms < MAX_TAKEOFF_REARMS:
+            # Disarmed on the ground before the take-off took (every try of it lost on a
+            # lossy link, then the autopilot's own disarm delay): arm and take off again.
+            self._rearms += 1
+            self.emit("command", "disarmed on the ground before the take-off took (the "
+                      "autopilot's disarm delay): arming again", now,
+                      mavlink.MAV_SEVERITY_WARNING)  # fmt: skip
+            self._begin_arming(now)
             return
         if now - self.phase_since > self.timing.wall(self.takeoff_timeout_s):
             self.fail(f"take-off did not reach {relative:.1f} m", now)

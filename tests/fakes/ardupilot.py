@@ -156,6 +156,7 @@ class ArduCopterModel(FakeAutopilot):
         extra_arm_refusals: int = 0,
         refusal_text_delay_s: float = 0.0,
         info_text_with_refusals: str | None = None,
+        lost_takeoffs: int = 0,
     ) -> None:
         """`known_modes`: the modes this firmware was built with (others: `No such mode`).
         `extra_arm_refusals`: the next N arming attempts in GUIDED fail as in A1 at 28.66
@@ -163,7 +164,9 @@ class ArduCopterModel(FakeAutopilot):
         `refusal_text_delay_s`: the `Arm: ...` / `No such mode N` text of a refusing ACK goes
         out this long (wall seconds) after the ACK; 0: just before it, as recorded (1 ms).
         `info_text_with_refusals`: an INFO text sent with every refusing ACK, just before it
-        (as `EKF3 IMU0 is using GPS` (A1 41.52) can be near an ARM): never the reason."""
+        (as `EKF3 IMU0 is using GPS` (A1 41.52) can be near an ARM): never the reason.
+        `lost_takeoffs`: the next N NAV_TAKEOFF commands never arrive (a lossy link), so the
+        vehicle stays on the ground and disarms after DISARM_DELAY."""
         super().__init__(system_id=system_id, speedup=speedup)
         self.boot_home = home
         self.home = home
@@ -173,6 +176,7 @@ class ArduCopterModel(FakeAutopilot):
         self.extra_arm_refusals = extra_arm_refusals
         self.refusal_text_delay_s = refusal_text_delay_s
         self.info_text_with_refusals = info_text_with_refusals
+        self.lost_takeoffs = lost_takeoffs
         self.mode = STABILIZE
         self.armed = False
         self._started = False
@@ -233,6 +237,8 @@ class ArduCopterModel(FakeAutopilot):
                 self._set_mode(mode, now)
             else:
                 self._refuse(msg, text(4, f"No such mode {mode}"), now, text_first=False)
+        elif cmd == mavlink.MAV_CMD_NAV_TAKEOFF and self.lost_takeoffs > 0:
+            self.lost_takeoffs -= 1  # lost on the way: no effect, no ACK
         elif cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
             ok = self.armed and self.mode == GUIDED and not self.flying() and msg.param7 > 0
             if ok:
@@ -445,7 +451,7 @@ class ArduCopterModel(FakeAutopilot):
                     self._touchdown_at = now
                 if now - self._touchdown_at >= p.land_disarm / s:
                     self._disarm(now, announce=True)
-            elif self._takeoff_at is None and now - self._armed_at >= p.disarm_delay:
+            elif self._takeoff_at is None and now - self._armed_at >= p.disarm_delay / s:
                 self._disarm(now, announce=True)
         if self.armed and self._takeoff_at is not None and now >= self._takeoff_at:
             if not self.flying():

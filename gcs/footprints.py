@@ -212,6 +212,10 @@ class Footprints:
     report: FootprintReport
 
 
+#: The files beside a shapefile that it needs (recordings attach them with it).
+SHAPEFILE_SIDES = (".shx", ".dbf", ".prj", ".cpg")
+
+
 def footprint_file(item: Any) -> str | None:
     """The file name an `obstacles[i]` item of the raw YAML names, in either form, or None."""
     if not isinstance(item, dict):

@@ -620,24 +620,28 @@ def _serve_live(context: foxglove.Context, port: int):
 
 
 def mission_geojson_files(mission) -> dict[str, bytes]:
-    """The GeoJSON files the mission names (`obstacles[i].geojson`), by the name written in
-    the mission file, read from beside it (the mission was validated: they exist)."""
+    """The footprint files the mission names (`obstacles[i].geojson`, as a file name or as
+    `{file: ...}`), by the name written in the mission file, read from beside it (the mission
+    was validated: they exist). A shapefile brings its side files (`.shx`, `.dbf`, ...)."""
+    from gcs.footprints import SHAPEFILE_SIDES, footprint_file
+
     try:
         data = yaml.safe_load(mission.text) or {}
     except yaml.YAMLError:
         return {}
     files = {}
+    folder = Path(mission.source).parent
     for item in data.get("obstacles") or []:
-        if isinstance(item, dict) and isinstance(item.get("geojson"), str):
-            name = item["geojson"]
+        name = footprint_file(item)
+        if name is None:
+            continue
+        names = [name]
+        if name.lower().endswith(".shp"):
+            stem = name[: -len(".shp")]
+            names += [stem + side for side in SHAPEFILE_SIDES if (folder / (stem + side)).exists()]
+        for each in names:
             try:
-                files[name] = (Path(mission.source).parent / name).read_bytes()
+                files[each] = (folder / each).read_bytes()
             except OSError:
                 continue
     return files
-
-    def __enter__(self) -> FlightRecorder:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()

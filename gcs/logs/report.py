@@ -35,6 +35,7 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from gcs import plot  # noqa: E402
 from gcs.errors import InputError  # noqa: E402
+from gcs.footprints import SHAPEFILE_SIDES, footprint_file  # noqa: E402
 from gcs.logs.logreader import Recording  # noqa: E402
 from gcs.mission import Mission, parse_mission  # noqa: E402
 from gcs.planning import MissionPlan  # noqa: E402
@@ -192,11 +193,25 @@ def _mission(recording: Recording) -> Mission | None:
         with tempfile.TemporaryDirectory(prefix="fleetline-report-") as folder:
             source = Path(folder) / "mission.yaml"
             for index, item in enumerate(data.get("obstacles") or []):
-                name = item.get("geojson") if isinstance(item, dict) else None
-                if isinstance(name, str) and f"geojson/{name}" in recording.attachments:
-                    local = Path(folder) / f"obstacles-{index}.geojson"
-                    local.write_bytes(recording.attachments[f"geojson/{name}"])
-                    item["geojson"] = str(local)  # absolute: read from here
+                name = footprint_file(item)
+                if name is None or f"geojson/{name}" not in recording.attachments:
+                    continue
+                # written under a new stem, its suffix kept (it decides the format), with a
+                # shapefile's side files beside it
+                stem = Path(folder) / f"obstacles-{index}"
+                suffix = "".join(Path(name).suffixes)
+                local = Path(f"{stem}{suffix}")
+                local.write_bytes(recording.attachments[f"geojson/{name}"])
+                base = name[: -len(".shp")] if name.lower().endswith(".shp") else None
+                for side in SHAPEFILE_SIDES if base is not None else ():
+                    if f"geojson/{base}{side}" in recording.attachments:
+                        Path(f"{stem}{side}").write_bytes(
+                            recording.attachments[f"geojson/{base}{side}"]
+                        )
+                if isinstance(item["geojson"], dict):
+                    item["geojson"]["file"] = str(local)  # absolute: read from here
+                else:
+                    item["geojson"] = str(local)
             return parse_mission(data, source, text.decode())
     except (InputError, yaml.YAMLError, AttributeError, UnicodeDecodeError):
         return None

@@ -733,12 +733,17 @@ class _Planner:
         return self._caches[level]
 
     @property
+    def all_caches(self) -> list[EdgeCache]:
+        """Every cache of this problem, the ellipses outgrown included (their work counts)."""
+        return [*self._caches.values(), *self._retired]
+
+    @property
     def edges_examined(self) -> int:
-        return sum(c.examined for c in self._caches.values())
+        return sum(c.examined for c in self.all_caches)
 
     @property
     def candidate_edges(self) -> np.ndarray:
-        found = [c.computed_edges() for c in self._caches.values()]
+        found = [c.computed_edges() for c in self.all_caches]
         return np.concatenate(found) if found else np.zeros((0, 2, 2))
 
     def solve(self, rows: ParkingRows) -> tuple[_LevelResult, str, str | None]:
@@ -952,7 +957,7 @@ def plan_path(
                 level=level,
                 repairs=result.repairs,
                 fleet_rounds=fleet_round,
-                edge_count=sum(c.size for c in planner._caches.values()),
+                edge_count=sum(c.size for c in planner.all_caches),
                 lower_bound_m=length if result.certified else min(result.lower_bound, length),
                 stopped=planner.budget.stopped,
             )

@@ -33,6 +33,15 @@ Defaults (every key not listed as required is optional):
 * `radio`: `{enabled: true, hop_latency_ms: 2, jitter_ms: 1, loss: 0}`.
 * `signing.key_file`: unset (the signing layer picks its default); paths are relative to the
   mission file.
+* `stations` (monitoring stations, use case 1: the fleet leaves A, a UAV holds each point,
+  then the fleet flies home): none. With `stations`, `goal` is optional (`Mission.goal` is
+  None without it; given, B is one more base station, not a route point).
+  `stations.order`: `tsp` (`given`: the order written); `stations.points[i].name`: `P<i+1>`;
+  `stations.points[i].dwell_s`: 0 (informative). A point is `x`/`y` (m) or `lat`/`lon`
+  (WGS84 degrees, through `origin` at `origin.alt`, within `MAX_FOOTPRINT_DISTANCE_M`).
+  Each point keeps safety_margin from every obstacle, 2 x safety_margin from every other
+  point and 2 sqrt 2 x safety_margin from A (the parking row).
+* `return.at` (only with `stations`): unset, the fleet flies home on the operator's command.
 
 Obstacles: `rectangle` (center, size, angle_deg) and `polygon` are solid polygons, `segment` a
 wall, `geojson` a footprint file (relative to the mission file; `FILE` or `{file, strict, crs,
@@ -56,7 +65,7 @@ import yaml
 
 from gcs.errors import InputError, join_key
 from gcs.footprints import (
-    MAX_FOOTPRINT_DISTANCE_M,  # noqa: F401 - re-exported
+    MAX_FOOTPRINT_DISTANCE_M,  # also re-exported
     FootprintError,
     FootprintOptions,
     FootprintReport,
@@ -64,7 +73,7 @@ from gcs.footprints import (
     read_footprints,
 )
 from gcs.footprints import log as footprint_log
-from gcs.geodesy import Origin
+from gcs.geodesy import Origin, geodetic_to_enu
 from planner.formation import DISTANCE_TOLERANCE, min_radio_range
 from planner.numbers import fmt_against
 from planner.obstacles import Obstacles
@@ -79,6 +88,8 @@ DEFAULT_TRACKING_FRACTION = 0.3
 #: `gcs.footprints.MAX_FOOTPRINT_DISTANCE_M`, imported above.
 BACKENDS = ("sim", "ardupilot", "px4")
 PARKING = ("segment", "ray")
+#: `stations.order`: `tsp` (the planner picks the shortest tour) or `given` (as written).
+STATION_ORDERS = ("tsp", "given")
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")
 
 
@@ -101,6 +112,22 @@ class Point:
 
     x: float
     y: float
+
+    @property
+    def xy(self) -> np.ndarray:
+        return np.array([self.x, self.y])
+
+
+@dataclass(frozen=True)
+class Station:
+    """A monitoring station (use case 1): a point a UAV holds, metres in the local frame.
+
+    `dwell_s` is how long the point should be held (informative, seconds, default 0)."""
+
+    name: str
+    x: float
+    y: float
+    dwell_s: float = 0.0
 
     @property
     def xy(self) -> np.ndarray:
@@ -199,7 +226,9 @@ class Signing:
 
 @dataclass(frozen=True, eq=False)
 class Mission:
-    """A validated mission. `obstacle_keys[i]` is the key path of `obstacles.geometries[i]`."""
+    """A validated mission. `obstacle_keys[i]` is the key path of `obstacles.geometries[i]`.
+
+    `goal` is None only in a stations mission without `goal` (`stations` non-empty)."""
 
     source: Path
     text: str
@@ -207,7 +236,7 @@ class Mission:
     name: str
     origin: Origin
     start: Pose
-    goal: Pose
+    goal: Pose | None
     safety_margin: float
     radio_range: float
     altitude: float
@@ -224,6 +253,27 @@ class Mission:
     signing: Signing
     #: One report per footprint file (`obstacles[i].geojson`), in obstacle order.
     footprints: tuple[FootprintReport, ...] = ()
+    #: Monitoring stations (use case 1), in the order written; empty for an A->B mission.
+    stations: tuple[Station, ...] = ()
+    #: `stations.order`: `tsp` or `given`.
+    station_order: str = "tsp"
+    #: `return.at`: mission time (s) at which the fleet flies home; None = on command.
+    return_at: float | None = None
+
+    @property
+    def base_station_points(self) -> np.ndarray:
+        """(k, 2) float: A, then B when the mission has one, then every `base_stations` point."""
+        points = [self.start.xy]
+        if self.goal is not None:
+            points.append(self.goal.xy)
+        points.extend(b.xy for b in self.base_stations)
+        return np.array(points, float).reshape(-1, 2)
+
+    @property
+    def base_station_names(self) -> tuple[str, ...]:
+        """Names of `base_station_points`: A, B (when the mission has one), BS1, BS2, ..."""
+        ends = ("A",) if self.goal is None else ("A", "B")
+        return ends + tuple(f"BS{k + 1}" for k in range(len(self.base_stations)))
 
     @property
     def error_budget(self) -> float:
@@ -445,9 +495,15 @@ class _Parser:
             (
                 "version", "name", "origin", "start", "goal", "safety_margin", "radio_range",
                 "altitude", "parking", "speed", "fleet", "vehicle", "base_stations",
-                "obstacles", "ground_users", "sim", "radio", "signing",
+                "obstacles", "ground_users", "sim", "radio", "signing", "stations", "return",
             ),
-            ("version", "start", "goal", "safety_margin", "radio_range", "altitude", "speed"),
+            tuple(
+                key
+                for key in ("version", "start", "goal", "safety_margin", "radio_range",
+                            "altitude", "speed")
+                # a stations mission needs no B (it ends where it began)
+                if not (key == "goal" and isinstance(data, dict) and "stations" in data)
+            ),
         )  # fmt: skip
         version = root["version"]
         if not isinstance(version, int) or isinstance(version, bool) or version != VERSION:
@@ -455,7 +511,7 @@ class _Parser:
         name = self.name(root.get("name"))
         origin = self.origin(root["origin"]) if "origin" in root else DEFAULT_ORIGIN
         start = self.pose(root["start"], "start")
-        goal = self.pose(root["goal"], "goal")
+        goal = self.pose(root["goal"], "goal") if "goal" in root else None
         safety_margin = self.positive(root["safety_margin"], "safety_margin", "m")
         radio_range = self.positive(root["radio_range"], "radio_range", "m")
         needed = min_radio_range(safety_margin)
@@ -483,11 +539,23 @@ class _Parser:
         sim = self.sim(root.get("sim", {}))
         radio = self.radio(root.get("radio", {}))
         signing = self.signing(root.get("signing", {}))
-        if np.linalg.norm(goal.xy - start.xy) <= DISTANCE_TOLERANCE:
+        stations: tuple[Station, ...] = ()
+        order = STATION_ORDERS[0]
+        if "stations" in root:
+            stations, order = self.stations(root["stations"], origin)
+        return_at = None
+        if "return" in root:
+            if "stations" not in root:
+                raise self.fail(
+                    "return", "this key only with stations (it brings the fleet home from them)"
+                )
+            return_at = self.return_at(root["return"])
+        if goal is not None and np.linalg.norm(goal.xy - start.xy) <= DISTANCE_TOLERANCE:
             raise self.fail("goal", f"a point different from start, got ({goal.x:g}, {goal.y:g})")
         for key, pose in (("start", start), ("goal", goal)):
-            if self.check_clearance:
+            if self.check_clearance and pose is not None:
                 self.clear_of_obstacles(key, pose, obstacles, keys, safety_margin)
+        self.stations_apart(stations, start, obstacles, keys, safety_margin)
         for report in self.footprint_reports:  # once the mission is accepted: one line each
             if report.noteworthy:
                 footprint_log.warning("%s", report.line())
@@ -514,6 +582,9 @@ class _Parser:
             radio=radio,
             signing=signing,
             footprints=tuple(self.footprint_reports),
+            stations=stations,
+            station_order=order,
+            return_at=return_at,
         )
 
     def name(self, value: Any) -> str:
@@ -548,6 +619,114 @@ class _Parser:
             self.number(m["x"], join_key(path, "x"), unit="m"),
             self.number(m["y"], join_key(path, "y"), unit="m"),
         )
+
+    def stations(self, value: Any, origin: Origin) -> tuple[tuple[Station, ...], str]:
+        """`stations: {order, points}` -> the points (local frame) and the order."""
+        m = self.mapping(value, "stations", ("order", "points"), ("points",))
+        order = self.choice(m.get("order", STATION_ORDERS[0]), "stations.order", STATION_ORDERS)
+        what = "points {name, x, y, dwell_s} or {name, lat, lon, dwell_s}"
+        items = self.sequence(m["points"], "stations.points", what)
+        if not items:
+            raise self.fail("stations.points", f"a non-empty list of {what}, got an empty list")
+        out: list[Station] = []
+        named: dict[str, int] = {}
+        for i, item in enumerate(items):
+            station = self.station(item, join_key("stations.points", i), i, origin)
+            if station.name in named:
+                j = named[station.name]
+                given = isinstance(item, dict) and "name" in item
+                key = join_key(join_key("stations.points", i), "name")
+                shown = f"{station.name!r}" if given else f"the default {station.name!r}"
+                raise self.fail(
+                    key,
+                    f"a name no other point has ({shown} is already stations.points[{j}]'s)",
+                )
+            named[station.name] = i
+            out.append(station)
+        return tuple(out), order
+
+    def station(self, value: Any, path: str, index: int, origin: Origin) -> Station:
+        """One `stations.points[i]`: exactly one of x/y or lat/lon, a name, dwell_s."""
+        m = self.mapping(value, path, ("name", "x", "y", "lat", "lon", "dwell_s"))
+        name = f"P{index + 1}"
+        if "name" in m:
+            name = self.string(m["name"], join_key(path, "name"))
+        local = any(k in m for k in ("x", "y"))
+        geodetic = any(k in m for k in ("lat", "lon"))
+        if local == geodetic:
+            got = "both" if local else "neither"
+            raise self.fail(path, f"exactly one of x/y (m) or lat/lon (degrees), got {got}")
+        if local:
+            for key in ("x", "y"):
+                if key not in m:
+                    raise self.fail(join_key(path, key), "this required key (with x/y)")
+            x = self.number(m["x"], join_key(path, "x"), unit="m")
+            y = self.number(m["y"], join_key(path, "y"), unit="m")
+        else:
+            for key in ("lat", "lon"):
+                if key not in m:
+                    raise self.fail(join_key(path, key), "this required key (with lat/lon)")
+            lat = self.number(m["lat"], join_key(path, "lat"), low=-90.0, high=90.0, unit="degrees")
+            lon = self.number(
+                m["lon"], join_key(path, "lon"), low=-180.0, high=180.0, unit="degrees"
+            )
+            enu = geodetic_to_enu(lat, lon, origin.alt, origin)
+            away = float(np.linalg.norm(enu))  # straight line, so the far side of the Earth too
+            if away > MAX_FOOTPRINT_DISTANCE_M:
+                raise self.fail(
+                    path,
+                    f"a point within {MAX_FOOTPRINT_DISTANCE_M / 1000:g} km of origin "
+                    f"(lat {lat:g}, lon {lon:g} is {away / 1000:.0f} km away: is origin right?)",
+                )
+            x, y = float(enu[0]), float(enu[1])
+        dwell = self.nonnegative(m.get("dwell_s", 0.0), join_key(path, "dwell_s"), "s")
+        return Station(name=name, x=x, y=y, dwell_s=dwell)
+
+    def return_at(self, value: Any) -> float:
+        m = self.mapping(value, "return", ("at",), ("at",))
+        return self.positive(m["at"], "return.at", "s, mission time")
+
+    def stations_apart(
+        self,
+        stations: tuple[Station, ...],
+        start: Pose,
+        obstacles: Obstacles,
+        keys: tuple[str, ...],
+        safety_margin: float,
+    ) -> None:
+        """Each station: safety_margin from every obstacle (as A and B), 2 x safety_margin
+        from every other station (two UAVs hold them), 2 sqrt 2 x safety_margin from A (a UAV
+        holds it apart from the parking row, whose slots are that far apart)."""
+        if not stations:
+            return
+        xy = np.array([s.xy for s in stations], float)
+        paths = [join_key("stations.points", i) for i in range(len(stations))]
+        for path, station in zip(paths, stations, strict=True):
+            self.clear_of_obstacles(path, station, obstacles, keys, safety_margin)
+        from_a = 2.0 * math.sqrt(2.0) * safety_margin
+        to_a = np.hypot(*(xy - start.xy).T)
+        near_a = np.flatnonzero(to_a < from_a - DISTANCE_TOLERANCE)
+        if len(near_a):
+            i = int(near_a[0])
+            d = float(to_a[i])
+            raise self.fail(
+                paths[i],
+                f"a point at least 2 sqrt 2 x safety_margin = {_fmt(from_a, d)} m from start "
+                f"(A, where the fleet parks); {stations[i].name} is {_fmt(d, from_a)} m from it",
+            )
+        apart = 2.0 * safety_margin
+        gaps = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+        gaps[np.triu_indices(len(xy))] = np.inf  # each pair once: the later point (j > i)
+        for j in range(1, len(xy)):
+            i = int(np.argmin(gaps[j]))
+            if gaps[j, i] < apart - DISTANCE_TOLERANCE:
+                d = float(gaps[j, i])
+                raise self.fail(
+                    paths[j],
+                    f"a point at least 2 x safety_margin = {_fmt(apart, d)} m from every other "
+                    f"point; {stations[j].name} is {_fmt(d, apart)} m from {stations[i].name} "
+                    f"({paths[i]})",
+                )
 
     def vehicle(self, value: Any, safety_margin: float) -> Vehicle:
         keys = ("max_speed", "max_acceleration", "radius", "tracking_allowance", "apply_limits")
@@ -850,12 +1029,13 @@ class _Parser:
     def clear_of_obstacles(
         self,
         key: str,
-        pose: Pose,
+        pose: Pose | Station,
         obstacles: Obstacles,
         keys: tuple[str, ...],
         safety_margin: float,
     ) -> None:
-        """A and B must lie outside every obstacle and its safety margin (DESIGN 3.2)."""
+        """A and B (and each station) must lie outside every obstacle and its safety margin
+        (DESIGN 3.2)."""
         if len(obstacles) == 0:
             return
         point = shapely.Point(pose.x, pose.y)

@@ -43,6 +43,7 @@ from planner.kinematics import (
     smoothing_error_bound,
 )
 from planner.numbers import fmt_against, plural
+from planner.route import RoutePlan, RouteProblem, first_leg, plan_route
 from planner.search import SearchProgress, plan_path
 from planner.types import PathPlan, PathProblem
 from planner.validity import row_refusal
@@ -71,6 +72,7 @@ class MissionPlan:
     smoothing_window_s: float | None
     smoothing_error_m: float | None
     planning_time_s: float
+    route: RoutePlan | None = None  # stations missions (DESIGN 7)
 
     @property
     def valid(self) -> bool:
@@ -87,7 +89,10 @@ class MissionPlan:
 
 def mission_problem(mission: Mission, method: str = "exact") -> PathProblem:
     """The planner's problem for `mission`: A, B, angles, margins, obstacles, parking mode
-    and fixed fleet size (None with `fleet.size: auto`)."""
+    and fixed fleet size (None with `fleet.size: auto`). For a stations mission, its first
+    leg (A -> the first point visited, with Delta_A): what its row refusals are about."""
+    if mission.stations:
+        return first_leg(route_problem(mission, method), mission.fleet.size or 1)
     return PathProblem(
         start=mission.start.xy,
         goal=mission.goal.xy,
@@ -123,6 +128,16 @@ def plan_mission(
     """
     conns = mission.fleet.connections if connections is None else tuple(connections)
     conn_key = "fleet.connections" if connections is None else "--connect"
+    began = clock()
+
+    def progress(state: SearchProgress) -> bool:
+        elapsed = clock() - began
+        if on_progress is not None:
+            on_progress(state, elapsed)
+        return time_limit_s is not None and elapsed >= time_limit_s
+
+    if mission.stations:
+        return _plan_stations(mission, cap_speed, conns, conn_key, method, progress, clock)
     lower = min_fleet_size(
         float(np.linalg.norm(mission.goal.xy - mission.start.xy)),
         mission.safety_margin,
@@ -144,32 +159,10 @@ def plan_mission(
     problem = mission_problem(mission, method)
     check_rows(mission, problem, first_rows, fixed or lower)
     began = clock()
-
-    def progress(state: SearchProgress) -> bool:
-        elapsed = clock() - began
-        if on_progress is not None:
-            on_progress(state, elapsed)
-        return time_limit_s is not None and elapsed >= time_limit_s
-
     path_plan = plan_path(problem, progress)
     planning_time = clock() - began
 
-    speeds = mission.speed
-    profile = _profile(speeds)
-    invalid = MissionPlan(
-        mission=mission,
-        path_plan=path_plan,
-        formation=None,
-        speeds=speeds,
-        profile=profile,
-        safe_speed_mps=None,
-        speed_capped=False,
-        duration_s=None,
-        error_budget_m=mission.error_budget,
-        smoothing_window_s=None,
-        smoothing_error_m=None,
-        planning_time_s=planning_time,
-    )
+    invalid = _unflown(mission, path_plan, planning_time)
     if path_plan.rows is not None:
         check_rows(mission, problem, path_plan.rows, int(path_plan.fleet_size))
     if not path_plan.valid:
@@ -187,6 +180,34 @@ def plan_mission(
         radio_range=mission.radio_range,
         rows=path_plan.rows,
     )
+    return _flown(invalid, formation, cap_speed)
+
+
+def _unflown(
+    mission: Mission, path_plan: PathPlan, planning_time: float, route: RoutePlan | None = None
+) -> MissionPlan:
+    """The plan before anything needs a formation: the mission's speeds, no formation yet."""
+    return MissionPlan(
+        mission=mission,
+        path_plan=path_plan,
+        formation=None,
+        speeds=mission.speed,
+        profile=_profile(mission.speed),
+        safe_speed_mps=None,
+        speed_capped=False,
+        duration_s=None,
+        error_budget_m=mission.error_budget,
+        smoothing_window_s=None,
+        smoothing_error_m=None,
+        planning_time_s=planning_time,
+        route=route,
+    )
+
+
+def _flown(invalid: MissionPlan, formation: LineFormation, cap_speed: bool) -> MissionPlan:
+    """`invalid` completed for `formation`: the safe speed (refused above it unless capping),
+    the duration, the smoothing window and its error bound (DESIGN 3.5)."""
+    mission, speeds, profile = invalid.mission, invalid.speeds, invalid.profile
     safe = float(safe_speed(formation, mission.vehicle.max_acceleration, mission.error_budget))
     capped = False
     if speeds.max > safe + SPEED_TOLERANCE:
@@ -218,6 +239,67 @@ def plan_mission(
         smoothing_window_s=window,
         smoothing_error_m=smoothing,
     )
+
+
+def route_problem(mission: Mission, method: str = "exact") -> RouteProblem:
+    """The planner's route problem for a stations mission (DESIGN 7)."""
+    return RouteProblem(
+        start=mission.start.xy,
+        points=np.array([point.xy for point in mission.stations]),
+        start_angle_deg=mission.start.theta_deg,
+        safety_margin=mission.safety_margin,
+        radio_range=mission.radio_range,
+        obstacles=mission.obstacles,
+        names=tuple(point.name for point in mission.stations),
+        order=mission.station_order,
+        parking=mission.parking,
+        fleet_size=mission.fleet.size,
+        method=method,
+    )
+
+
+def _plan_stations(
+    mission: Mission,
+    cap_speed: bool,
+    conns: tuple[str, ...],
+    conn_key: str,
+    method: str,
+    progress: Callable[[SearchProgress], bool],
+    clock: Callable[[], float],
+) -> MissionPlan:
+    """A stations mission: the route, its stations and the formation capped on them.
+    An unreachable point is an input error naming it (unless the time limit stopped the
+    search); a fixed `fleet.size` below the stations' minimum is refused."""
+    problem = route_problem(mission, method)
+    fixed = mission.fleet.size
+    size = fixed or 1
+    first = first_leg(problem, size)
+    check_rows(mission, first, first.rows(size), size)
+    began = clock()
+    route = plan_route(problem, progress)
+    planning_time = clock() - began
+    invalid = _unflown(mission, route.path_plan(), planning_time, route)
+    if not route.valid:
+        if route.failed_point is not None and not route.stopped:
+            name = mission.stations[route.failed_point].name
+            raise InputError(
+                mission.source,
+                f"stations.points[{route.failed_point}]",
+                f"a point the fleet can reach; {name!r} cannot be: {route.reason}",
+            )
+        return invalid
+    if fixed is not None:
+        _check_fleet_size(mission, fixed, route.layout.minimum, "the stations of the route")
+    _check_fleet(mission, route.fleet_size, conns, conn_key)
+    formation = LineFormation(
+        path=route.path,
+        fleet_size=route.fleet_size,
+        safety_margin=mission.safety_margin,
+        radio_range=mission.radio_range,
+        rows=route.rows,
+        stations=route.layout.stations,
+    )
+    return _flown(invalid, formation, cap_speed)
 
 
 def check_rows(mission: Mission, problem: PathProblem, rows: ParkingRows, fleet_size: int) -> None:
@@ -302,7 +384,44 @@ def plan_json(plan: MissionPlan) -> dict[str, Any]:
     from gcs.footprints import map_json  # the footprint files' reports (docs/outputs.md)
 
     out["map"] = map_json(mission.footprints)
+    if plan.route is not None:
+        out["parking_rows"]["B"] = []
+        out["parking_slots"]["B"] = []
+        out["stations"] = stations_json(plan)
     return out
+
+
+def stations_json(plan: MissionPlan) -> dict[str, Any]:
+    """The `stations` block of a stations mission's plan JSON (docs/outputs.md): the visiting
+    order, each point's distance along the route and the UAV that holds it, every UAV's
+    station, the time the last one reaches it, and when the fleet returns."""
+    route, mission = plan.route, plan.mission
+    layout = route.layout
+    points = []
+    for k, index in enumerate(route.order.tolist()):
+        station = mission.stations[index]
+        points.append(
+            {
+                "name": station.name,
+                "xy": [station.x, station.y],
+                "distance_m": _number(route.point_distance[k]) if route.valid else None,
+                "uav": int(layout.holders[k]) if layout is not None else None,
+                "dwell_s": station.dwell_s,
+            }
+        )
+    formation = plan.formation
+    slots = formation.station_slots if formation is not None else None
+    return {
+        "order": mission.station_order,
+        "orders_tried": route.orders_tried,
+        "points": points,
+        "uav_stations_m": [float(s) for s in layout.stations] if layout is not None else [],
+        "uav_station_xy": _points(slots),
+        "relays": [int(n) for n in np.flatnonzero(layout.relays) + 1] if layout else [],
+        "on_station_s": _number(plan.duration_s),
+        "return_at_s": mission.return_at,
+        "failed_point": route.failed_point,
+    }
 
 
 def plan_within_limits(

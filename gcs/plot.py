@@ -63,7 +63,7 @@ def draw_map(ax, plan: MissionPlan) -> None:
     rho = mission.safety_margin
     obstacles = mission.obstacles
     geoms = obstacles.geometries
-    extent = [mission.start.xy, mission.goal.xy]
+    extent = list(mission.base_station_points)
 
     edges = np.asarray(pp.candidate_edges if pp.candidate_edges is not None else [])
     if edges.size:
@@ -85,7 +85,8 @@ def draw_map(ax, plan: MissionPlan) -> None:
 
     rows = pp.rows
     if rows is not None:
-        for index, row in enumerate((rows.start_row, rows.goal_row)):
+        drawn = (rows.start_row,) if rows.open_goal else (rows.start_row, rows.goal_row)
+        for index, row in enumerate(drawn):
             row = np.asarray(row)
             if mission.parking == "ray":  # draw a readable stub of the paper's rays
                 direction = (row[1] - row[0]) / np.linalg.norm(row[1] - row[0])
@@ -94,7 +95,9 @@ def draw_map(ax, plan: MissionPlan) -> None:
             ax.plot(*row.T, color="tab:blue", lw=1.2, alpha=0.6, zorder=3, label=label)
             extent += list(row)
     if plan.formation is not None:
-        slots = np.vstack([plan.formation.start_slots, plan.formation.goal_slots])
+        slots = plan.formation.start_slots
+        if plan.route is None:
+            slots = np.vstack([slots, plan.formation.goal_slots])
         ax.scatter(*slots.T, s=14, color="tab:blue", zorder=4, label="parking slots")
         extent += list(slots)
     if len(pp.path):
@@ -109,11 +112,14 @@ def draw_map(ax, plan: MissionPlan) -> None:
     if len(users):
         ax.scatter(*users.T, marker="s", s=25, color="tab:purple", zorder=6, label="ground user")
         extent += list(users)
-    ends = np.array([mission.start.xy, mission.goal.xy])
+    if plan.route is not None:
+        _draw_stations(ax, plan)
+    ends = mission.base_station_points[: 1 if mission.goal is None else 2]
+    label = "A (base station)" if mission.goal is None else "A, B (base stations)"
     ax.scatter(*ends.T, marker="^", s=110, color="tab:green", edgecolor="k", zorder=7,
-               label="A, B (base stations)")  # fmt: skip
-    for name, pose in (("A", mission.start), ("B", mission.goal)):
-        ax.annotate(name, (pose.x, pose.y), xytext=(6, 6), textcoords="offset points",
+               label=label)  # fmt: skip
+    for name, (x, y) in zip(mission.base_station_names, ends.tolist(), strict=False):
+        ax.annotate(name, (x, y), xytext=(6, 6), textcoords="offset points",
                     fontsize=12, weight="bold", zorder=8)  # fmt: skip
 
     pts = np.array(extent, float).reshape(-1, 2)
@@ -127,6 +133,25 @@ def draw_map(ax, plan: MissionPlan) -> None:
     what = f"path of {pp.length_m:.0f} m" if plan.valid else "no valid path"
     ax.set_title(f"map: {what}, margins rho_c = {rho:g} m (dashed)")
     ax.legend(loc="best", fontsize=8)
+
+
+def _draw_stations(ax, plan: MissionPlan) -> None:
+    """A stations mission: each point with its name and holder, the UAVs' stations."""
+    mission, route = plan.mission, plan.route
+    points = np.array([p.xy for p in mission.stations]).reshape(-1, 2)
+    ax.scatter(*points.T, marker="*", s=160, color="gold", edgecolor="k", zorder=7,
+               label="monitoring points")  # fmt: skip
+    holder = {}
+    if route.layout is not None:
+        holder = dict(zip(route.order.tolist(), route.layout.holders.tolist(), strict=True))
+    for index, point in enumerate(mission.stations):
+        text = point.name + (f" (UAV {holder[index]})" if index in holder else "")
+        ax.annotate(text, (point.x, point.y), xytext=(6, -12), textcoords="offset points",
+                    fontsize=9, zorder=8)  # fmt: skip
+    if plan.formation is not None:
+        relays = plan.formation.station_slots
+        ax.scatter(*relays.T, marker="x", s=30, color="tab:blue", zorder=6,
+                   label="UAV stations")  # fmt: skip
 
 
 def _span(extent: list) -> float:

@@ -67,12 +67,25 @@ class ParkingRows:
     `start_row` runs from A backwards (A, A - length*e_0); `goal_row` from B forwards.
     With parking "segment" each row is as long as N UAVs need, (N-1) dS_c, plus rho_c;
     with "ray" (the paper's reading) they are effectively infinite.
+
+    Legs of a route (`planner.route`, DESIGN 7) generalise both: `start_row` may be a
+    polyline, the route flown so far from the leg's start back to A and on along Delta_A (its
+    first piece is the previous leg's last segment, e_0 its direction), and `open_goal`
+    means no row beyond the goal (`goal_row` is then the point B twice) and no arrival
+    angle: the leg ends on a station point.
     """
 
-    start_row: np.ndarray  # (2, 2)
+    start_row: np.ndarray  # (M, 2), M >= 2: a segment, or a leg's polyline
     goal_row: np.ndarray  # (2, 2)
     start_direction: np.ndarray  # e_0, unit, towards A
     goal_direction: np.ndarray  # e_K, unit, away from B
+    open_goal: bool = False
+
+    @property
+    def start_rest(self) -> np.ndarray | None:
+        """The start row without its first piece (what a first segment must keep 2 rho_c
+        from, condition 5 across legs), or None for a plain parking row."""
+        return self.start_row[1:] if len(self.start_row) > 2 else None
 
 
 def parking_rows(

@@ -94,8 +94,19 @@ def graph_nodes(problem: PathProblem) -> Nodes:
     row_pts = np.array([start, start, goal, goal]) + rho * SQRT2 * np.column_stack(
         [np.cos(ab + offsets), np.sin(ab + offsets)]
     )
+    if problem.start_tail is not None:
+        # A leg's start (DESIGN 7): the route behind it is a wall kept 2 rho_c away, so it
+        # gets nodes as a segment end does (eq. 39 with 2 rho_c: beyond it at +-45 degrees)
+        # and beside it (a turn of 90 degrees, so that a leg can turn back in open space).
+        e0 = np.array(
+            [math.cos(ab + offsets[0] + math.pi / 2), math.sin(ab + offsets[0] + math.pi / 2)]
+        )
+        normal = np.array([-e0[1], e0[0]])
+        turns = 2.0 * rho * np.array([normal, -normal, e0 + normal, e0 - normal])
+        row_pts = np.vstack([start + turns, row_pts[2:]])
     base_pts = np.vstack([start, goal, row_pts])
-    base_kind = np.array([KIND_START, KIND_GOAL] + [KIND_ROW] * 4)
+    base_kind = np.array([KIND_START, KIND_GOAL] + [KIND_ROW] * len(row_pts))
+    base = len(base_pts)
 
     segs = obstacles.segments
     c, d = segs[:, 0], segs[:, 1]
@@ -121,14 +132,14 @@ def graph_nodes(problem: PathProblem) -> Nodes:
     obs_owner = obs_owner[~inside]
     all_pts = np.vstack([base_pts, obs_pts])
     kind = np.concatenate([base_kind, np.full(len(obs_pts), KIND_OBSTACLE)])
-    anchor = np.vstack([np.full((6, 2), np.nan), obs_anchor])
-    cone = np.concatenate([np.zeros((6, 2, 2)), obs_cone])
+    anchor = np.vstack([np.full((base, 2), np.nan), obs_anchor])
+    cone = np.concatenate([np.zeros((base, 2, 2)), obs_cone])
 
     # Flat: the node lies on the margin of its own obstacle (a side next to its corner).
     flat = np.zeros(len(all_pts), bool)
     if len(obs_pts):
         own = shapely.distance(shapely.points(obs_pts), obstacles.geometries[obs_owner])
-        flat[6:] = own <= rho + DISTANCE_TOLERANCE
+        flat[base:] = own <= rho + DISTANCE_TOLERANCE
 
     label = _merge_labels(all_pts)
     rep = label == np.arange(len(all_pts))
@@ -217,26 +228,50 @@ def wraps_corner(
     return straight
 
 
+@dataclass(frozen=True, eq=False)
+class RowGeometry:
+    """A `ParkingRows` as prepared shapely lines for the row tests: `goal` is None with an
+    open goal, `start_rest` None for a plain parking row (see `ParkingRows.start_rest`)."""
+
+    start: shapely.Geometry
+    goal: shapely.Geometry | None
+    start_rest: shapely.Geometry | None
+
+    @classmethod
+    def of(cls, rows) -> RowGeometry:
+        start = shapely.LineString(rows.start_row)
+        goal = None if rows.open_goal else shapely.LineString(rows.goal_row)
+        rest = rows.start_rest
+        rest = None if rest is None else shapely.LineString(rest)
+        for line in (start, goal, rest):
+            if line is not None:
+                shapely.prepare(line)
+        return cls(start, goal, rest)
+
+
 def segments_clear_of_rows(
     starts: np.ndarray,
     ends: np.ndarray,
     from_start: np.ndarray,
     to_goal: np.ndarray,
-    start_row: shapely.Geometry,
-    goal_row: shapely.Geometry,
+    rows: RowGeometry,
     safety_margin: float,
 ) -> np.ndarray:
     """Def. 5 / eq. 35 with the DESIGN 3.2 erratum: a segment not starting at A keeps
-    2 rho_c from Delta_A, a segment not ending at B keeps 2 rho_c from Delta_B."""
+    2 rho_c from Delta_A, a segment not ending at B keeps 2 rho_c from Delta_B. A leg's
+    first segment keeps 2 rho_c from its start tail beyond the first piece (DESIGN 7)."""
     ok = np.ones(len(starts), bool)
     if len(starts) == 0:
         return ok
     limit = 2.0 * safety_margin - DISTANCE_TOLERANCE
     low, high = np.minimum(starts, ends), np.maximum(starts, ends)
-    for row, exempt in ((start_row, from_start), (goal_row, to_goal)):
+    tests = [(rows.start, ~from_start), (rows.goal, ~to_goal), (rows.start_rest, from_start)]
+    for row, applies in tests:
+        if row is None:
+            continue
         xmin, ymin, xmax, ymax = shapely.bounds(row)
         near = (
-            ~exempt
+            applies
             & (low[:, 0] <= xmax + limit)
             & (high[:, 0] >= xmin - limit)
             & (low[:, 1] <= ymax + limit)
@@ -278,17 +313,13 @@ def edge_ok(problem: PathProblem, rows, starts: np.ndarray, ends: np.ndarray) ->
     ok = ~problem.obstacles.segments_within(
         np.stack([starts, ends], axis=1), rho - DISTANCE_TOLERANCE
     )
-    ok &= segments_clear_of_rows(
-        starts,
-        ends,
-        from_start,
-        to_goal,
-        shapely.LineString(rows.start_row),
-        shapely.LineString(rows.goal_row),
-        rho,
-    )
+    ok &= segments_clear_of_rows(starts, ends, from_start, to_goal, RowGeometry.of(rows), rho)
     ok &= parking_angles_ok(
-        ends - starts, from_start, to_goal, rows.start_direction, rows.goal_direction
+        ends - starts,
+        from_start,
+        to_goal & (not rows.open_goal),
+        rows.start_direction,
+        rows.goal_direction,
     )
     ok &= np.hypot(*(ends - starts).T) > DISTANCE_TOLERANCE
     return ok

@@ -35,13 +35,29 @@ velocity and acceleration as its exact derivatives. Its deviation from V_n is bo
 vehicle's acceleration limit and the error budget (the model is in `safe_speed`'s docstring).
 Computing the reference at t needs the profile up to t + w/2: speed changes must be announced
 at least w/2 ahead (DESIGN 4).
+
+Monitoring-station formations (`LineFormation.stations`, use case 1): the path is the route
+A -> P_1 -> ... -> P_m (no parking row at its end) and UAV n holds at s_n, a distance along the
+route from A (s_1 > ... > s_N; consecutive ones between dS_c and dS_r apart and s_N <= dS_r
+for the guarantees, not checked here). UAV n's distance beyond A is min(eq. 27's, s_n): the
+leaders stop first, the followers close up behind them. So V_n(S) = eq. 27's V_n(min(S, S_n))
+with the cap S_n = s_n + (n-1) dS_r, and its thresholds at and beyond the cap collapse onto it
+(min(L_{k,n}, S_n)); the jumps stay e_k - e_{k-1}, whose sum over the collapsed ones is minus
+the direction UAV n arrives with: the merged group is the stop. Everyone holds from
+S_out = max S_n (UAV N's, as the gaps are at most dS_r), for any larger S: the hold needs no
+speed 0. The fleet flies home from M = `return_distance` (set when the return is decided,
+`with_return`): V_n(S) = V_n(2 M - S) for S in [M, 2 M], the motion so far played backwards
+(from the hold when M >= S_out: UAV N, nearest A, leaves first), the thresholds truncated at M
+and extended by the mirrored 2 M - L_{k,n} (k descending) with the jumps in reverse order; at
+S >= 2 M everyone is parked on its start slot again. S stays monotone in time and the closed
+forms below apply unchanged.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -203,6 +219,11 @@ class LineFormation:
 
     `fleet_size` is not checked against eq. 28 here (tests may force a fleet too small on
     purpose); `radio_range` must satisfy eq. 9 so that dS_r >= dS_c.
+
+    `stations` (N,) makes it a monitoring-station formation (module docstring): UAV n holds at
+    distance s_n beyond A along the path (0 < s_n <= len(P), strictly decreasing; the spacing
+    rules of the guarantees are the mission's to check, like eq. 28). `return_distance` (only with
+    stations) adds the mirrored flight home. Both at their defaults: the A -> B formation.
     """
 
     path: np.ndarray  # (K, 2): P_1 = A ... P_K = B
@@ -210,6 +231,8 @@ class LineFormation:
     safety_margin: float
     radio_range: float
     rows: ParkingRows
+    stations: np.ndarray | None = None  # (N,) s_n, metres beyond A along the path
+    return_distance: float | None = None  # with stations: V_n(S) = V_n(2 M - S) for S >= M
 
     def __post_init__(self) -> None:
         path = np.array(self.path, dtype=float)
@@ -232,6 +255,7 @@ class LineFormation:
             raise ValueError(
                 "LineFormation: radio_range must be >= 2(1+sqrt 2) safety_margin (eq. 9)"
             )
+        stations = self._checked_stations(fleet_size, float(lengths.sum()))
         e0 = np.asarray(self.rows.start_direction, dtype=float)
         ek = np.asarray(self.rows.goal_direction, dtype=float)
         e0 = e0 / np.hypot(*e0)
@@ -249,9 +273,17 @@ class LineFormation:
         thresholds[:, count + 1] = thresholds[:, count] + (fleet_size - 1 - rank) * spacing_c
         # Direction of motion after passing m thresholds: 0, e_0, ..., e_K, 0 (index m).
         phase_directions = np.concatenate([np.zeros((1, 2)), directions, np.zeros((1, 2))])
+        # eq. 27's, for `_eq27_passed` (a station formation counts through them too)
+        object.__setattr__(self, "_departures", _readonly(thresholds[:, 0].copy()))
+        object.__setattr__(self, "_arrivals", _readonly(thresholds[:, -1].copy()))
+        if stations is not None:
+            thresholds, phase_directions = self._station_tables(
+                thresholds, phase_directions, stations, rank * spacing_r
+            )
         # Velocity jump at each threshold per unit speed: e_k - e_{k-1}; coincident thresholds
-        # (n = 1 starts at A, n = N stops at B) are merged into the first of their group.
-        jumps = np.diff(phase_directions, axis=0)  # (K+2, 2)
+        # (n = 1 starts at A, n = N stops at B, a station's collapsed ones) are merged into the
+        # first of their group.
+        jumps = np.diff(phase_directions, axis=0)  # (K+2, 2); returning (2(K+2), 2)
         prefix_l = np.concatenate(
             [np.zeros((fleet_size, 1, 2)), np.cumsum(thresholds[:, :, None] * jumps, axis=1)],
             axis=1,
@@ -275,8 +307,6 @@ class LineFormation:
         behind = fleet_size - 1 - rank
         highest = float(cumulative[-1]) + behind * spacing_c
         object.__setattr__(self, "_highest_beyond", _readonly(highest))
-        object.__setattr__(self, "_departures", _readonly(thresholds[:, 0].copy()))
-        object.__setattr__(self, "_arrivals", _readonly(thresholds[:, -1].copy()))
         # the pieces of the path extended by both rows: start point, arc length at it
         starts = np.concatenate([path[:1], path[:-1], path[-1:]])
         arcs = np.concatenate([[0.0], cumulative[:-1], cumulative[-1:]])
@@ -285,6 +315,71 @@ class LineFormation:
         start_slots = path[0] - (rank * spacing_c)[:, None] * directions[0]
         object.__setattr__(self, "_start_slots", _readonly(start_slots))
         object.__setattr__(self, "_crossing_cache", None)  # (profile, prefix sums), see below
+
+    def _checked_stations(self, fleet_size: int, path_length: float) -> np.ndarray | None:
+        """`stations` validated (and stored read-only, clipped to len(P)), `return_distance`
+        checked."""
+        mirror = self.return_distance
+        if mirror is not None:
+            if isinstance(mirror, bool) or not np.isfinite(mirror) or mirror < 0:
+                raise ValueError("LineFormation: return_distance must be a finite number >= 0")
+            object.__setattr__(self, "return_distance", float(mirror))
+        if self.stations is None:
+            if mirror is not None:
+                raise ValueError(
+                    "LineFormation: return_distance needs stations (it mirrors their flight)"
+                )
+            return None
+        try:
+            stations = np.array(self.stations, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError("LineFormation: stations must be numbers") from None
+        if stations.shape != (fleet_size,):
+            raise ValueError(
+                f"LineFormation: stations must be ({fleet_size},), one per UAV, "
+                f"not {stations.shape}"
+            )
+        if not np.all(np.isfinite(stations)):
+            raise ValueError("LineFormation: stations must be finite")
+        if np.any(stations <= 0) or np.any(stations > path_length + DISTANCE_TOLERANCE):
+            raise ValueError(
+                f"LineFormation: stations must lie in (0, len(P) = {path_length:.6g}] m beyond A"
+            )
+        stations = np.minimum(stations, path_length)
+        if np.any(np.diff(stations) >= 0):
+            raise ValueError(
+                "LineFormation: stations must be strictly decreasing (UAV 1 holds farthest)"
+            )
+        object.__setattr__(self, "stations", _readonly(stations))
+        return stations
+
+    def _station_tables(self, thresholds, phase_directions, stations, rank_spacing_r):
+        """Thresholds (N, G) and phase directions (G+1, 2) of a station formation from eq. 27's
+        (G = K+2); returning, (N, 2G) and (2G+1, 2). Sets the caps S_n, S_out and the mirror M."""
+        caps = stations + rank_spacing_r  # S_n = s_n + (n-1) dS_r, where UAV n stops
+        outbound = float(caps.max())  # S_out: UAV N's cap whenever the gaps are <= dS_r
+        object.__setattr__(self, "_caps", _readonly(caps))
+        object.__setattr__(self, "_outbound", outbound)
+        object.__setattr__(self, "_outbound_count", thresholds.shape[1])
+        # S_n <= L_K,n (s_n <= len(P)): UAV n is still on the path when it stops. Its later
+        # thresholds collapse onto S_n; their jumps add up to minus its direction there.
+        capped = np.minimum(thresholds, caps[:, None])
+        if self.return_distance is None:
+            return capped, phase_directions
+        # The return is V_n(2 M - S) from M = `return_distance` on (M >= S_out: from the hold;
+        # earlier, the motion so far played backwards): the thresholds beyond M collapse onto
+        # it, and each threshold L becomes 2 M - L, in reverse order, and
+        # the slope on either side changes sign. Just after the mirrored kink the slope is minus
+        # the outbound one just before it, just before it minus the one just after: the jump
+        # there is (-e_{k-1}) - (-e_k) = e_k - e_{k-1}, the outbound jump. So the directions go
+        # on with the jumps in reverse order, their cumulative sum: -e_{k-1} after the mirror of
+        # threshold k, and 0 (parked on the start slot) after the mirror of L_0,n.
+        mirror = self.return_distance
+        object.__setattr__(self, "_mirror", mirror)
+        capped = np.minimum(capped, mirror)
+        mirrored = 2.0 * mirror - capped[:, ::-1]
+        extended = np.concatenate([phase_directions, -phase_directions[-2::-1]])
+        return np.concatenate([capped, mirrored], axis=1), extended
 
     # ----- geometry -------------------------------------------------------------------------
 
@@ -310,13 +405,40 @@ class LineFormation:
 
     @property
     def thresholds(self) -> np.ndarray:
-        """(N, K+2): L_{k,n} for k = 0 .. K+1 (module docstring), row n-1 for UAV n."""
+        """(N, K+2): L_{k,n} for k = 0 .. K+1 (module docstring), row n-1 for UAV n.
+
+        Station formations: min(L_{k,n}, S_n); returning, (N, 2(K+2)): min(L_{k,n}, S_n, M) followed by their
+        mirrors 2 M - min(L_{k,n}, S_n, M), k = K+1 .. 0. Every row is non-decreasing."""
         return self._thresholds
 
     @property
     def total_distance(self) -> float:
-        """L_{K+2} = len(P) + (N-1) dS_r: distance after which everyone is parked (eq. 25)."""
-        return self.path_length + (self.fleet_size - 1) * self._spacing_r
+        """L_{K+2} = len(P) + (N-1) dS_r: distance after which everyone is parked (eq. 25).
+
+        Station formations: S_out (everyone on its station), 2 M returning (everyone
+        back on its start slot)."""
+        if self.stations is None:
+            return self.path_length + (self.fleet_size - 1) * self._spacing_r
+        return 2.0 * self._mirror if self.returning else self._outbound
+
+    @property
+    def outbound_distance(self) -> float:
+        """S_out = max_n s_n + (n-1) dS_r, the S from which every UAV is on its station (the
+        hold; UAV N's cap); `total_distance` for an A -> B formation."""
+        if self.stations is None:
+            return self.total_distance
+        return self._outbound
+
+    @property
+    def returning(self) -> bool:
+        """A station formation with its way home (`return_distance` set)."""
+        return self.return_distance is not None
+
+    def with_return(self, distance: float) -> LineFormation:
+        """This station formation flying home from formation distance `distance` on (M): the
+        same V_n(S) up to M, then V_n(2 M - S). M at or after `outbound_distance` returns from
+        the hold; earlier, the flight so far is played backwards."""
+        return replace(self, return_distance=float(distance))
 
     @property
     def start_slots(self) -> np.ndarray:
@@ -325,9 +447,20 @@ class LineFormation:
 
     @property
     def goal_slots(self) -> np.ndarray:
-        """(N, 2): P_{K+1},n = B + (N-n) dS_c e_K (eq. 17 with the dS_c factor)."""
+        """(N, 2): P_{K+1},n = B + (N-n) dS_c e_K (eq. 17 with the dS_c factor): where each UAV
+        ends. Station formations: its station (`station_slots`), its start slot when returning."""
+        if self.stations is not None:
+            return self._start_slots.copy() if self.returning else self.station_slots
         behind = self.fleet_size - 1 - self._rank
         return self.path[-1] + (behind * self._spacing_c)[:, None] * self._directions[-1]
+
+    @property
+    def station_slots(self) -> np.ndarray:
+        """(N, 2): the points where the UAVs hold, s_n along the path from A; `goal_slots` for
+        an A -> B formation."""
+        if self.stations is None:
+            return self.goal_slots
+        return self._point_at(self.stations)
 
     @property
     def departure_distance(self) -> np.ndarray:
@@ -336,7 +469,9 @@ class LineFormation:
 
     @property
     def arrival_distance(self) -> np.ndarray:
-        """(N,): L_{K+1},n, the S at which UAV n parks on its arrival slot."""
+        """(N,): L_{K+1},n, the S at which UAV n parks on its arrival slot (for good: station
+        formations S_n, on its station; returning, 2 M - L_0,n, back on its start
+        slot)."""
         return self._thresholds[:, -1]
 
     # ----- V_n as a function of S -------------------------------------------------------------
@@ -344,9 +479,15 @@ class LineFormation:
     def distance_beyond_start(self, distance) -> np.ndarray:
         """(..., N): distance travelled beyond A by each UAV (the paper's S', fig. 3).
 
-        Negative on the start row, above len(P) on the goal row.
+        Negative on the start row, above len(P) on the goal row. Station formations: at most
+        s_n; returning, that of the mirrored distance min(S, 2 M - S).
         """
         s = np.asarray(distance, dtype=float)[..., None]
+        if self.stations is not None:
+            if self.returning:
+                s = np.minimum(s, 2.0 * self._mirror - s)
+            beyond = np.maximum(s - self._rank_spacing_r, self._lowest_beyond)
+            return np.minimum(beyond, self.stations)
         return np.minimum(
             np.maximum(s - self._rank_spacing_r, self._lowest_beyond), self._highest_beyond
         )
@@ -356,13 +497,21 @@ class LineFormation:
         return self._point_at(self.distance_beyond_start(distance))
 
     def directions(self, distance) -> np.ndarray:
-        """dV_n/dS (right derivative), S.shape + (N, 2): e_k while moving, 0 while parked."""
+        """dV_n/dS (right derivative), S.shape + (N, 2): e_k while moving, 0 while parked (or
+        holding on a station); -e_k on the way home of a returning formation."""
         return self._phase_directions[self._passed(distance, strict=False)]
 
     def phases(self, distance) -> np.ndarray:
-        """S.shape + (N,) int: 0 parked at start, 1 start row, 2 path, 3 goal row, 4 parked."""
+        """S.shape + (N,) int: 0 parked at start, 1 start row, 2 path, 3 goal row, 4 parked.
+
+        Station formations: 4 is holding on its station (3 never occurs: no goal row); with
+        a return, the mirrored phases follow, 2 (path, homewards), 1 (start row), and 0 parked
+        on its start slot again. A UAV is in the phase it leaves until S exceeds the
+        threshold."""
         count = len(self.path)
         table = np.array([0, 1] + [2] * (count - 1) + [3, 4])
+        if self.returning:
+            table = np.concatenate([table, table[-2::-1]])
         return table[self._passed(distance, strict=True)]
 
     def threshold_times(self, profile: SpeedProfile) -> np.ndarray:
@@ -370,7 +519,10 @@ class LineFormation:
         return profile.time_at_distance(self._thresholds)
 
     def duration(self, profile: SpeedProfile) -> float:
-        """Mission duration T = Phi(len(P) + (N-1) dS_r) (eq. 25); inf if never reached."""
+        """Mission duration T = Phi(len(P) + (N-1) dS_r) (eq. 25); inf if never reached.
+
+        Station formations: Phi(`total_distance`), S_out or 2 S_out (Phi of a distance where the
+        profile stops for good is inf, eq. 20: a profile that ends with speed 0 at S_out)."""
         return float(profile.time_at_distance(self.total_distance))
 
     def _point_at(self, beyond: np.ndarray) -> np.ndarray:
@@ -388,6 +540,34 @@ class LineFormation:
     def _passed(self, distance, strict: bool) -> np.ndarray:
         """S.shape + (N,): how many thresholds L_{k,n} are below S (strict) or <= S."""
         s = np.asarray(distance, dtype=float)[..., None]
+        if self.stations is not None:
+            return self._station_passed(s, strict)
+        return self._eq27_passed(s, strict)
+
+    def _station_passed(self, s: np.ndarray, strict: bool) -> np.ndarray:
+        """`_passed` of a station formation; `s` broadcasts against (N,) (one S per UAV, or
+        (..., 1) for all). Counted through eq. 27's thresholds and the caps, exactly the
+        comparisons `_eq27_passed` makes: below S_n the capped thresholds below S are eq. 27's;
+        past it all G. On the way home (S > S_out, or S >= S_out counting <=) the mirrored
+        thresholds 2 S_out - L below S are the outbound L above S' = 2 S_out - S: G minus those
+        <= S' (resp. < S')."""
+        count = self._outbound_count
+        out = self._capped_passed(s, strict)
+        if not self.returning:
+            return out
+        mirror = self._mirror
+        back = 2 * count - self._capped_passed(2.0 * mirror - s, not strict)
+        home = s > mirror if strict else s >= mirror
+        return np.where(home, back, out)
+
+    def _capped_passed(self, s: np.ndarray, strict: bool) -> np.ndarray:
+        """How many of min(L_{k,n}, S_n) are below S (strict) or <= S, `s` as `_station_passed`."""
+        capped = s > self._caps if strict else s >= self._caps
+        return np.where(capped, self._outbound_count, self._eq27_passed(s, strict))
+
+    def _eq27_passed(self, s: np.ndarray, strict: bool) -> np.ndarray:
+        """How many of eq. 27's L_{k,n} are below S (strict) or <= S; `s` broadcasts against
+        (N,) (the last axis one S per UAV, or 1)."""
         side = "left" if strict else "right"
         below = np.less if strict else np.less_equal
         on_path = self._cumulative.searchsorted(s - self._rank_spacing_r, side=side)
@@ -398,9 +578,10 @@ class LineFormation:
         return on_path + departed + arrived
 
     def _kinks(self) -> tuple[np.ndarray, np.ndarray]:
-        """Kinks of V_n(S): positions (N, K+2) = thresholds and unit-speed velocity jumps.
+        """Kinks of V_n(S): positions (N, G) = thresholds and unit-speed velocity jumps.
 
-        Thresholds that coincide (UAV 1 starts at A, UAV N stops at B) are merged: the first of
+        Thresholds that coincide (UAV 1 starts at A, UAV N stops at B, a station's collapsed
+        thresholds; returning, UAV N's stop and turn back at M) are merged: the first of
         a group carries the whole jump e_last - e_{first-1}, the others 0.
         """
         thresholds = self._thresholds
@@ -431,7 +612,7 @@ class Reference:
 
 
 def _crossing_prefix(formation: LineFormation, profile: SpeedProfile) -> np.ndarray:
-    """(N, K+3, 2): prefix sums over the thresholds of jump_k (J(phi) - L phi), phi = Phi(L),
+    """(N, G+1, 2): prefix sums over the thresholds of jump_k (J(phi) - L phi), phi = Phi(L),
     for `_antiderivative`. They depend on the profile only, which changes on a speed change:
     the formation keeps the last profile's (the fast and live loops evaluate every tick)."""
     cached = formation._crossing_cache
@@ -620,10 +801,28 @@ def smoothing_error_bound(
     Kinks: each UAV's threshold crossings (bends, start, stop; |dv| = v |e_k - e_{k-1}|) and
     every speed step |v_i - v_{i-1}| while the UAV moves. Coincident kinks are counted
     separately (conservative).
+
+    Station formations hold on purpose at a kink (the formation stops at S_out, UAV N's
+    station), where counting the bend at Phi and both speed steps would triple the stop's
+    weight: their kinks are the jumps of each UAV's velocity in time, measured
+    (`_velocity_jumps`).
     """
     window_s = float(window_s)
     if window_s <= 0:
         return 0.0
+    if formation.stations is not None:
+        times, weights = _velocity_jumps(formation, profile)
+        # Instants without a jump (collapsed thresholds, a UAV holding through a speed step)
+        # weigh nothing: each alone far away, so that they widen no neighbourhood.
+        far = float(times.max()) + 2 * window_s + 1.0
+        spread = far + np.arange(times.shape[1]) * (window_s + 1.0)
+        times = np.where(weights > 0, times, spread)
+        order = np.argsort(times, axis=1, kind="stable")
+        return _max_bump_sum(
+            np.take_along_axis(times, order, axis=1),
+            np.take_along_axis(weights, order, axis=1),
+            window_s,
+        )
     thresholds, jumps = formation._kinks()
     crossing = profile.time_at_distance(thresholds)  # (N, K+2)
     finite = np.isfinite(crossing)
@@ -649,6 +848,33 @@ def smoothing_error_bound(
         np.take_along_axis(weights, order, axis=1),
         window_s,
     )
+
+
+def _velocity_jumps(formation: LineFormation, profile: SpeedProfile):
+    """Every UAV's velocity jumps in time: kink times (N, M) sorted per row, |jump| (N, M).
+
+    dV_n/dt = v(t) dV_n/dS(S(t)) changes only at a speed step or when S crosses a threshold,
+    at Phi(L) (a threshold reached at the start of a stop is left at its end, eq. 20; the
+    stop's start is a speed step). Between consecutive such instants the velocity is
+    constant: it is sampled half-way (right-continuous: at an instant itself when two
+    coincide), and each jump is the difference of the velocities on either side (0 before
+    the mission start). Unreached thresholds weigh 0 (their time: the last reached one's).
+    """
+    count = formation.fleet_size
+    crossing = profile.time_at_distance(formation._thresholds)  # (N, G)
+    steps = np.broadcast_to(profile.times, (count, len(profile.times)))
+    times = np.sort(np.concatenate([crossing, steps], axis=1), axis=1)  # inf last
+    finite = np.isfinite(times)
+    later = np.concatenate([times[:, 1:], np.full((count, 1), np.inf)], axis=1)
+    middle = np.where(np.isfinite(later), 0.5 * (times + later), times + 1.0)
+    middle = np.where(finite, middle, 0.0)
+    distance = profile.distance(middle)  # (N, M), row n for UAV n
+    passed = formation._station_passed(distance.T, strict=False).T
+    velocity = profile.speed_at(middle)[..., None] * formation._phase_directions[passed]
+    before = np.concatenate([np.zeros((count, 1, 2)), velocity[:, :-1]], axis=1)
+    jump = velocity - before
+    weights = np.where(finite, np.hypot(jump[..., 0], jump[..., 1]), 0.0)
+    return np.where(finite, times, float(times[finite].max())), weights
 
 
 def _smallest_window(positions, jumps, speed: float, max_acceleration: float) -> float:

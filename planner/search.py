@@ -43,13 +43,13 @@ from planner.formation import (
     DISTANCE_TOLERANCE,
     ParkingRows,
     min_fleet_size,
-    parking_rows,
 )
 from planner.graph import (
     GOAL,
     START,
     EdgeCache,
     Nodes,
+    RowGeometry,
     graph_nodes,
     parking_angles_ok,
     segments_clear_of_rows,
@@ -110,10 +110,7 @@ class _RowFilter:
     def __init__(self, problem: PathProblem, rows: ParkingRows, nodes: Nodes) -> None:
         self.problem = problem
         self.rows = rows
-        self.start_row = shapely.LineString(rows.start_row)
-        self.goal_row = shapely.LineString(rows.goal_row)
-        shapely.prepare(self.start_row)
-        shapely.prepare(self.goal_row)
+        self.geometry = RowGeometry.of(rows)
         self.nodes = nodes
         self._masks: dict[tuple, np.ndarray] = {}
 
@@ -145,19 +142,13 @@ class _RowFilter:
         ok = np.ones(len(src), bool)
         if row_tests:
             ok &= segments_clear_of_rows(
-                pts[src],
-                pts[dst],
-                from_start,
-                to_goal,
-                self.start_row,
-                self.goal_row,
-                self.problem.safety_margin,
+                pts[src], pts[dst], from_start, to_goal, self.geometry, self.problem.safety_margin
             )
         if departure or arrival:
             ok &= parking_angles_ok(
                 cache.direction[first : cache.size],
                 from_start & departure,
-                to_goal & arrival,
+                to_goal & arrival & (not self.rows.open_goal),
                 self.rows.start_direction,
                 self.rows.goal_direction,
             )
@@ -646,6 +637,12 @@ def _diagnose(problem: PathProblem, cache: EdgeCache, rows: _RowFilter, budget: 
     arrival = _reaches_goal(cache, rows, budget, arrival=False)
     if budget.spent:
         return _cap_reason(problem, budget)
+    leg = problem.start_tail is not None  # a leg of a route (planner.route, DESIGN 7)
+    if departure and leg:
+        return (
+            "every way on turns more than 90 degrees from the segment the route arrives on "
+            "(condition 4 at the point)"
+        )
     if departure:
         return (
             "every route needs a sharp bend at departure: the first segment of every route "
@@ -663,6 +660,11 @@ def _diagnose(problem: PathProblem, cache: EdgeCache, rows: _RowFilter, budget: 
             f"theta_B = {theta_b:g} deg)"
         )
     if _reaches_goal(cache, rows, budget, departure=False, arrival=False, row_tests=False):
+        if leg:
+            return (
+                "every way there comes within 2 rho_c of the route flown before it or of the "
+                "parking row at A (condition 5 across legs)"
+            )
         return (
             "the parking rows cut every route: no path keeps 2 rho_c from the row behind A "
             "and the row beyond B (eq. 35); change theta_A/theta_B or the fleet size"
@@ -878,15 +880,7 @@ class _Planner:
 
 
 def _rows(problem: PathProblem, fleet_size: int) -> ParkingRows:
-    return parking_rows(
-        problem.start,
-        problem.goal,
-        problem.start_angle_deg,
-        problem.goal_angle_deg,
-        fleet_size,
-        problem.safety_margin,
-        problem.parking,
-    )
+    return problem.rows(fleet_size)
 
 
 def plan_path(

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planner.formation import ParkingRows
+from planner.formation import ParkingRows, parking_rows
 from planner.obstacles import Obstacles
 from planner.validity import PathViolations
 
@@ -21,7 +21,11 @@ METHODS = ("exact", "penalty")
 class PathProblem:
     """A planning problem: A, B, parking angles theta_A, theta_B (degrees, counter-clockwise
     from A->B), rho_c, rho_R, obstacles, parking mode ("segment" or the paper's "ray"), fleet
-    size (None = the minimum of eq. 28, grown with the path), method and caps."""
+    size (None = the minimum of eq. 28, grown with the path), method and caps.
+
+    A leg of a route (`planner.route`) sets `start_tail`, the polyline flown before it from
+    its start back to A and along Delta_A, which replaces the start row (theta_A must then be
+    the direction of its first piece), and `open_goal` (no row beyond B, no arrival angle)."""
 
     start: np.ndarray
     goal: np.ndarray
@@ -35,16 +39,47 @@ class PathProblem:
     method: str = "exact"
     max_expansions: int = 2_000_000
     max_penalty_iterations: int = 50
+    start_tail: np.ndarray | None = None
+    open_goal: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "start", np.asarray(self.start, float).reshape(2))
         object.__setattr__(self, "goal", np.asarray(self.goal, float).reshape(2))
+        if self.start_tail is not None:
+            tail = np.asarray(self.start_tail, float).reshape(-1, 2)
+            if len(tail) < 2 or np.any(np.abs(tail[0] - self.start) > 1e-6):
+                raise ValueError("start_tail must be a polyline (M >= 2) beginning at the start")
+            object.__setattr__(self, "start_tail", tail)
         if self.parking not in ("segment", "ray"):
             raise ValueError(f"parking must be 'segment' or 'ray', not {self.parking!r}")
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, not {self.method!r}")
         if self.fleet_size is not None and self.fleet_size < 1:
             raise ValueError(f"fleet_size must be >= 1, not {self.fleet_size}")
+
+    def rows(self, fleet_size: int) -> ParkingRows:
+        """The rows the path must respect for `fleet_size` UAVs (DESIGN 3.2; a leg's start
+        tail and open goal, DESIGN 7)."""
+        rows = parking_rows(
+            self.start,
+            self.goal,
+            self.start_angle_deg,
+            self.goal_angle_deg,
+            fleet_size,
+            self.safety_margin,
+            self.parking,
+        )
+        if self.start_tail is None and not self.open_goal:
+            return rows
+        start_row = rows.start_row if self.start_tail is None else self.start_tail
+        goal_row = np.array([self.goal, self.goal]) if self.open_goal else rows.goal_row
+        return ParkingRows(
+            start_row=start_row,
+            goal_row=goal_row,
+            start_direction=rows.start_direction,
+            goal_direction=rows.goal_direction,
+            open_goal=self.open_goal,
+        )
 
 
 @dataclass(frozen=True, eq=False)

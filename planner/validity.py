@@ -19,7 +19,6 @@ from planner.formation import (
     ParkingRows,
     min_fleet_size,
     min_radio_range,
-    parking_rows,
 )
 from planner.numbers import fmt_against
 
@@ -156,13 +155,20 @@ def check_path(path: np.ndarray, problem: PathProblem, rows: ParkingRows) -> Pat
 
     # (2) eq. 35 with the erratum.
     limit = 2.0 * rho - DISTANCE_TOLERANCE
+    # A leg's start row is the route behind it: its first segment keeps 2 rho_c from the
+    # tail beyond the previous segment (condition 5 across legs, DESIGN 7).
     start_row = _row_breaches(lines, shapely.LineString(rows.start_row), limit, range(1, count))
-    goal_row = _row_breaches(lines, shapely.LineString(rows.goal_row), limit, range(count - 1))
+    if rows.start_rest is not None:
+        first = _row_breaches(lines, shapely.LineString(rows.start_rest), limit, range(1))
+        start_row = np.concatenate([first, start_row])
+    goal_row = _empty(2)
+    if not rows.open_goal:
+        goal_row = _row_breaches(lines, shapely.LineString(rows.goal_row), limit, range(count - 1))
 
     # (3) eq. 36: first and last segments within 90 degrees of the parking directions.
     right = math.pi / 2.0 + ANGLE_TOLERANCE
     departure = float(_angle_between(vec[0], rows.start_direction))
-    arrival = float(_angle_between(vec[-1], rows.goal_direction))
+    arrival = 0.0 if rows.open_goal else float(_angle_between(vec[-1], rows.goal_direction))
 
     # (4) eq. 37: every bend at most 90 degrees.
     bend = _angle_between(vec[:-1], vec[1:])
@@ -233,7 +239,9 @@ def row_refusal(problem: PathProblem, rows: ParkingRows) -> Refusal | None:
     """Eqs. 14-15 as a `Refusal` naming the row (and obstacle) at fault, or None."""
     rho = problem.safety_margin
     obstacles = problem.obstacles
-    named = (("start_row", "behind A", rows.start_row), ("goal_row", "beyond B", rows.goal_row))
+    named = [("start_row", "behind A", rows.start_row)]
+    if not rows.open_goal:
+        named.append(("goal_row", "beyond B", rows.goal_row))
     for subject, where, row in named:
         if len(obstacles) == 0:
             break
@@ -250,6 +258,8 @@ def row_refusal(problem: PathProblem, rows: ParkingRows) -> Refusal | None:
                 f"{fmt_against(rho, d, 6)} m away (eq. 14)"
             )
             return Refusal(subject, message, int(nearest[0]), float(dist[0]))
+    if rows.open_goal:
+        return None
     gap = float(
         shapely.distance(shapely.LineString(rows.start_row), shapely.LineString(rows.goal_row))
     )
@@ -311,16 +321,7 @@ def precheck_issue(problem: PathProblem, fleet_size: int | None = None) -> Refus
         if refusal:
             return refusal
     size = fleet_size or problem.fleet_size or min_fleet_size(straight, rho, radio)
-    rows = parking_rows(
-        problem.start,
-        problem.goal,
-        problem.start_angle_deg,
-        problem.goal_angle_deg,
-        size,
-        rho,
-        problem.parking,
-    )
-    return row_refusal(problem, rows)
+    return row_refusal(problem, problem.rows(size))
 
 
 def precheck(problem: PathProblem, fleet_size: int | None = None) -> str | None:

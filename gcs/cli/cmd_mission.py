@@ -177,6 +177,13 @@ def progress_text(state: SearchProgress, elapsed: float) -> str:
 
 def certification_text(pp: PathPlan) -> str:
     """Whether the path is certified shortest under definition 4, else how far it may be."""
+    if pp.level == "route":
+        legs = "every leg" if pp.certified else "not every leg"
+        gap = pp.length_m - pp.lower_bound_m
+        return (
+            f"{legs} certified shortest given the route before it (definition 4); "
+            f"{gap:,.1f} m longer than the straight lines through the points"
+        )
     if pp.certified:
         return "certified shortest (definition 4)"
     gap = pp.length_m - pp.lower_bound_m
@@ -261,10 +268,13 @@ def print_summary(console: Console, plan: MissionPlan, written: list[Path] | Non
     table.add_column("")
     table.add_row("path", _path_text(pp.path))
     table.add_row("length", f"{pp.length_m:.1f} m ({len(pp.path)} points)")
-    table.add_row(
-        "fleet size", f"{plural(pp.fleet_size, 'UAV')} (minimum {pp.min_fleet_size}, eq. 28)"
-    )
-    table.add_row("duration", f"{plan.duration_s:.1f} s")
+    if plan.route is None:
+        table.add_row(
+            "fleet size", f"{plural(pp.fleet_size, 'UAV')} (minimum {pp.min_fleet_size}, eq. 28)"
+        )
+        table.add_row("duration", f"{plan.duration_s:.1f} s")
+    else:
+        _station_rows(table, plan)
     capped = " (capped)" if plan.speed_capped else ""
     table.add_row(
         "speed",
@@ -286,6 +296,34 @@ def print_summary(console: Console, plan: MissionPlan, written: list[Path] | Non
     for path in written or ():
         table.add_row("wrote", str(path))
     console.print(table)
+
+
+def _station_rows(table: Table, plan: MissionPlan) -> None:
+    """A stations mission: the points in visiting order with their holders, the fleet, the
+    time every UAV is on its station, and when the fleet comes home."""
+    mission, route = plan.mission, plan.route
+    layout = route.layout
+    visits = [
+        f"{mission.stations[index].name} (UAV {uav}, {distance:.0f} m)"
+        for index, uav, distance in zip(
+            route.order.tolist(), layout.holders.tolist(), route.point_distance, strict=True
+        )
+    ]
+    table.add_row("points", " -> ".join(visits))
+    relays = int(layout.relays.sum())
+    table.add_row(
+        "fleet size",
+        f"{plural(route.fleet_size, 'UAV')}: {plural(len(visits), 'point')} held, "
+        f"{plural(relays, 'relay')} (minimum {layout.minimum})",
+    )
+    dwell = [point.dwell_s for point in mission.stations]
+    if mission.return_at is not None:
+        home = f"the fleet returns at t = {mission.return_at:g} s"
+    elif min(dwell) > 0:
+        home = f"the fleet returns {max(dwell):g} s later (dwell_s), or when asked (gcs return)"
+    else:
+        home = "the fleet returns when asked (gcs return)"
+    table.add_row("on station", f"every UAV after {plan.duration_s:.1f} s; {home}")
 
 
 def _path_text(path: Any, keep: int = 4) -> str:

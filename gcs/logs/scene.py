@@ -10,7 +10,10 @@ x east, y north, z up, metres):
   vertical panels, their rho_c margins (mitre corners, square caps, as the planner's graph
   assumes; DESIGN 3.1) as red outlines at the cruise altitude;
 * the planned path at the cruise altitude, the parking rows and slots on the ground, base
-  stations (A, B and the mission's extra ones) as masts, ground users as cubes;
+  stations (A, B and the mission's extra ones) as masts, ground users as cubes; for a
+  stations mission (DESIGN 7) the route, each monitoring point as a gold column named after
+  the point and the UAV that holds it, and every UAV's station on the route as a small disc
+  at the cruise altitude;
 * each UAV as a sphere in frame `uav<n>`, its virtual target V_n(t) (eq. 27) as a ring of
   radius rho_c in frame `uav<n>/target` (the UAV should stay inside it), both frame-locked: the
   transforms on `/tf` move them at every tick;
@@ -26,7 +29,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
@@ -109,6 +112,7 @@ MARGIN_RED = Color(r=0.9, g=0.2, b=0.2, a=0.9)
 PATH_ORANGE = Color(r=1.0, g=0.55, b=0.0, a=1.0)
 ROW_BLUE = Color(r=0.12, g=0.47, b=0.71, a=0.9)
 STATION_GREEN = Color(r=0.17, g=0.63, b=0.17, a=1.0)
+POINT_GOLD = Color(r=1.0, g=0.84, b=0.0, a=1.0)
 USER_PURPLE = Color(r=0.58, g=0.4, b=0.74, a=1.0)
 LINK_GREEN = Color(r=0.2, g=0.85, b=0.3, a=0.7)
 WHITE = Color(r=1.0, g=1.0, b=1.0, a=1.0)
@@ -125,13 +129,16 @@ class SceneGeometry:
     safety_margin: float
     radio_range: float
     altitude: float
-    path: np.ndarray  # (K, 2) planned path, A ... B
-    rows: np.ndarray  # (2, 2, 2) parking rows behind A and beyond B
-    slots: np.ndarray  # (2N, 2) parking slots at A then at B
+    path: np.ndarray  # (K, 2) planned path, A ... B (a stations mission: its route)
+    rows: np.ndarray  # (R, 2, 2) parking rows behind A and beyond B (no B row: R = 1)
+    slots: np.ndarray  # (2N, 2) parking slots at A then at B (a stations mission: at A)
     stations: np.ndarray  # (B, 2) A, B, then the extra base stations
     station_names: tuple[str, ...]
     ground_users: np.ndarray  # (U, 2)
     fleet_size: int
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (m, 2), in order
+    point_names: tuple[str, ...] = ()  # "name (UAV n)" of each monitoring point
+    uav_stations: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (N, 2)
 
     @classmethod
     def from_plan(cls, plan) -> SceneGeometry:
@@ -139,8 +146,21 @@ class SceneGeometry:
         mission = plan.mission
         formation = plan.formation
         rows = plan.path_plan.rows
-        stations = [mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations]
-        names = ("A", "B") + tuple(f"BS{k + 1}" for k in range(len(mission.base_stations)))
+        stations = mission.base_station_points
+        names = mission.base_station_names
+        route = plan.route
+        points, point_names, uav_stations = np.zeros((0, 2)), (), np.zeros((0, 2))
+        slots = np.vstack([formation.start_slots, formation.goal_slots])
+        row_list = [rows.start_row, rows.goal_row]
+        if route is not None:
+            order = route.order.tolist()
+            points = np.array([mission.stations[i].xy for i in order], float).reshape(-1, 2)
+            point_names = tuple(
+                f"{mission.stations[i].name} (UAV {uav})"
+                for i, uav in zip(order, route.layout.holders.tolist(), strict=True)
+            )
+            uav_stations = formation.station_slots
+            slots, row_list = formation.start_slots, [rows.start_row]
         return cls(
             name=mission.name,
             origin=mission.origin,
@@ -150,12 +170,15 @@ class SceneGeometry:
             radio_range=float(mission.radio_range),
             altitude=float(mission.altitude),
             path=np.asarray(formation.path, float),
-            rows=np.array([rows.start_row, rows.goal_row], float),
-            slots=np.vstack([formation.start_slots, formation.goal_slots]),
+            rows=np.array(row_list, float),
+            slots=slots,
             stations=np.array(stations, float).reshape(-1, 2),
             station_names=names,
             ground_users=np.array([[u.x, u.y] for u in mission.ground_users], float).reshape(-1, 2),
             fleet_size=int(formation.fleet_size),
+            points=points,
+            point_names=point_names,
+            uav_stations=uav_stations,
         )
 
     @property
@@ -301,6 +324,49 @@ def static_entities(geometry: SceneGeometry) -> list[SceneEntity]:
                         color=STATION_GREEN,
                         text=name,
                     )
+                ],
+            )
+        )
+    for name, (x, y) in zip(g.point_names, g.points.tolist(), strict=True):
+        entities.append(
+            SceneEntity(
+                frame_id=MAP_FRAME,
+                id=f"point/{name}",
+                cylinders=[
+                    CylinderPrimitive(
+                        pose=_pose(x, y, cruise / 2),
+                        size=Vector3(x=1.5, y=1.5, z=cruise),
+                        bottom_scale=1.0,
+                        top_scale=1.0,
+                        color=POINT_GOLD,
+                    )
+                ],
+                texts=[
+                    TextPrimitive(
+                        pose=_pose(x, y, cruise + 4),
+                        billboard=True,
+                        font_size=14.0,
+                        scale_invariant=True,
+                        color=POINT_GOLD,
+                        text=name,
+                    )
+                ],
+            )
+        )
+    if len(g.uav_stations):
+        entities.append(
+            SceneEntity(
+                frame_id=MAP_FRAME,
+                id="uav_stations",
+                cylinders=[
+                    CylinderPrimitive(
+                        pose=_pose(x, y, cruise),
+                        size=Vector3(x=3.0, y=3.0, z=0.2),
+                        bottom_scale=1.0,
+                        top_scale=1.0,
+                        color=_rgba(uav_colour(uav), 0.6),
+                    )
+                    for uav, (x, y) in enumerate(g.uav_stations.tolist(), start=1)
                 ],
             )
         )
@@ -467,7 +533,7 @@ def plan_geojson(geometry: SceneGeometry) -> str:
             {"color": "#ff8c00", "weight": 4},
         )
     ]
-    for name, row in zip(("parking row A", "parking row B"), g.rows, strict=True):
+    for name, row in zip(("parking row A", "parking row B"), g.rows, strict=False):
         features.append(
             _feature(
                 {"type": "LineString", "coordinates": _lonlat(row, g.origin)},
@@ -481,4 +547,8 @@ def plan_geojson(geometry: SceneGeometry) -> str:
         )
     for k, point in enumerate(_lonlat(g.ground_users, g.origin)):
         features.append(_feature({"type": "Point", "coordinates": point}, f"ground user {k}", {}))
+    for name, point in zip(g.point_names, _lonlat(g.points, g.origin), strict=True):
+        features.append(
+            _feature({"type": "Point", "coordinates": point}, f"monitoring point {name}", {})
+        )
     return json.dumps({"type": "FeatureCollection", "features": features})

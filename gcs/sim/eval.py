@@ -190,7 +190,7 @@ def run_metrics(run: EvalRun, mission: Mission) -> dict[str, Any]:
     users = p["node"][p["kind"] == GROUND][
         np.argsort(p["time_s"][p["kind"] == GROUND], kind="stable")
     ]
-    stations = np.array([mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations])
+    stations = mission.base_station_points
     user_xy = np.array([(u.x, u.y) for u in mission.ground_users]).reshape(-1, 2)
     to_station = np.hypot(*(user_xy[:, None, :] - stations[None, :, :]).transpose(2, 0, 1))
     needs_fleet = np.flatnonzero(to_station.min(axis=1) > mission.radio_range)

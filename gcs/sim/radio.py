@@ -49,7 +49,7 @@ def medium_setup(mission) -> MediumSetup | None:
     radio = mission.radio
     if not radio.enabled:
         return None
-    stations = [mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations]
+    stations = mission.base_station_points
     return MediumSetup(
         stations=tuple((float(x), float(y)) for x, y in stations),
         range_m=float(mission.radio_range),

@@ -12,7 +12,6 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 
-import networkx as nx
 import numpy as np
 
 from planner.formation import DISTANCE_TOLERANCE, collision_spacing, radio_spacing
@@ -102,6 +101,8 @@ def _annealed(dist: np.ndarray, route: np.ndarray) -> np.ndarray:
     keeps its best tour and starts from `route`, so the result is never longer. (Not through
     `traveling_salesman_problem`: it replaces weights by shortest paths, which would pass D.)
     """
+    import networkx as nx  # here: only routes of more than EXACT_POINTS points need it
+
     n = len(dist)
     dummy, big = n, 1.0 + n * float(dist.max())
     graph = nx.complete_graph(n + 1)

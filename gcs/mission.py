@@ -37,7 +37,8 @@ Defaults (every key not listed as required is optional):
   then the fleet flies home): none. With `stations`, `goal` is optional (`Mission.goal` is
   None without it; given, B is one more base station, not a route point).
   `stations.order`: `tsp` (`given`: the order written); `stations.points[i].name`: `P<i+1>`;
-  `stations.points[i].dwell_s`: 0 (informative). A point is `x`/`y` (m) or `lat`/`lon`
+  `stations.points[i].dwell_s`: 0 (with one on every point and no `return`, the fleet
+  flies home once the longest has passed). A point is `x`/`y` (m) or `lat`/`lon`
   (WGS84 degrees, through `origin` at `origin.alt`, within `MAX_FOOTPRINT_DISTANCE_M`).
   Each point keeps safety_margin from every obstacle, 2 x safety_margin from every other
   point and 2 sqrt 2 x safety_margin from A (the parking row).

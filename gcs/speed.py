@@ -15,8 +15,11 @@ at t looks w/2 ahead, DESIGN 3.5), at least twice the worst reaction time seen s
 least `min_lead_s`.
 
 `OperatorSocket` is a Unix stream socket next to the run's log (`<log>.sock`, owner-only); one
-JSON line in (`{"speed": 5, "at": 120}`, `at` optional), one JSON line out
-(`{"ok": true, "seq": 3, "effective_s": 123.4}` or `{"ok": false, "reason": "..."}`).
+JSON line in, one JSON line out. A speed change (`gcs speed`): `{"speed": 5, "at": 120}` (`at`
+optional; `"command": "speed"` may be added) -> `{"ok": true, "seq": 3, "effective_s": 123.4,
+"speed": 5}`; a stations mission's return home (`gcs return`): `{"command": "return", "at":
+300}` (`at` optional) -> `{"ok": true, "effective_s": 300.0, "distance": 812.5}`; a refusal
+`{"ok": false, "reason": "..."}`. `ask_running_mission` is the client side of both commands.
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ log = logging.getLogger(__name__)
 
 #: Longest path a Unix socket address may have (Linux sun_path is 108 bytes with the NUL).
 UNIX_PATH_MAX = 100
+#: What the operator socket may be asked (the request's `command`, "speed" when absent).
+OPERATOR_COMMANDS = ("speed", "return")
 
 
 @dataclass(frozen=True)
@@ -184,12 +189,14 @@ def _short_address(path: Path):
 
 @dataclass
 class OperatorRequest:
-    """A request read from the operator socket, answered with `reply`."""
+    """A request read from the operator socket, answered with `reply`: `command` is one of
+    `OPERATOR_COMMANDS` ("speed": `speed` is set; "return": it is None)."""
 
     speed: float | None
     at: float | None
     error: str | None
     connection: socket.socket
+    command: str = "speed"
 
     def reply(self, answer: dict) -> None:
         try:
@@ -255,29 +262,80 @@ class OperatorSocket:
 def _parse_request(line: bytes, conn: socket.socket) -> OperatorRequest:
     conn.setblocking(True)
     conn.settimeout(1.0)  # only for the reply, a few bytes to a local peer
+    command = "speed"
     try:
         data = json.loads(line.split(b"\n", 1)[0])
-        speed = data["speed"]
+        command = data.get("command", "speed")
+        if command not in OPERATOR_COMMANDS:
+            raise ValueError(f"command must be one of {', '.join(OPERATOR_COMMANDS)}")
         at = data.get("at")
-        if isinstance(speed, bool) or not isinstance(speed, int | float):
-            raise ValueError("speed must be a number")
         if at is not None and (isinstance(at, bool) or not isinstance(at, int | float)):
             raise ValueError("at must be a number")
-        return OperatorRequest(float(speed), None if at is None else float(at), None, conn)
+        at = None if at is None else float(at)
+        if command == "return":
+            return OperatorRequest(None, at, None, conn, command)
+        speed = data["speed"]
+        if isinstance(speed, bool) or not isinstance(speed, int | float):
+            raise ValueError("speed must be a number")
+        return OperatorRequest(float(speed), at, None, conn)
     except (ValueError, KeyError, TypeError, AttributeError) as error:
-        return OperatorRequest(None, None, f"bad request: {error}", conn)
+        command = command if command in OPERATOR_COMMANDS else "speed"
+        return OperatorRequest(None, None, f"bad request: {error}", conn, command)
 
 
-def send_operator_request(path: Path, speed: float, at: float | None, timeout_s: float = 5.0):
-    """Client side of `gcs speed`: send one request, return the mission's answer (a dict)."""
+def send_operator_command(path: Path, request: dict, timeout_s: float = 5.0) -> dict:
+    """Send one request (a JSON object) to the operator socket at `path`, return the mission's
+    answer (a dict). OSError: nobody answers there; ValueError: not an answer."""
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
         sock.settimeout(timeout_s)
         with _short_address(Path(path)) as address:
             sock.connect(address)
-        request = {"speed": speed} if at is None else {"speed": speed, "at": at}
         sock.sendall((json.dumps(request) + "\n").encode())
         answer = sock.makefile("rb").readline(4096)
-    return json.loads(answer)
+    data = json.loads(answer)
+    if not isinstance(data, dict):
+        raise ValueError(f"not an answer: {answer[:80]!r}")
+    return data
+
+
+def send_operator_request(path: Path, speed: float, at: float | None, timeout_s: float = 5.0):
+    """Client side of `gcs speed`: send one request, return the mission's answer (a dict)."""
+    request = {"speed": speed} if at is None else {"speed": speed, "at": at}
+    return send_operator_command(path, request, timeout_s)
+
+
+class NoMissionAnswered(Exception):
+    """No running mission answered a request (the message says where it looked)."""
+
+
+def ask_running_mission(
+    request: dict,
+    *,
+    socket_path: Path | None = None,
+    log_path: Path | None = None,
+    directory: Path = Path("logs"),
+) -> dict:
+    """Client side of `gcs speed` and `gcs return`: send `request` to the running mission
+    (its socket; the one of the run logging to `log_path`; else the newest socket under
+    `directory`, then the older ones until one answers) and return its answer.
+    Raises `NoMissionAnswered`."""
+    if socket_path is not None:
+        candidates = [socket_path]
+    elif log_path is not None:
+        candidates = [socket_path_for(log_path)]
+    else:
+        candidates = find_running_sockets(directory)
+    if not candidates:
+        raise NoMissionAnswered(
+            f"no running mission (no socket under ./{directory}; use --socket or --log)"
+        )
+    errors = []
+    for path in candidates:
+        try:
+            return send_operator_command(path, request)
+        except (OSError, ValueError) as error:
+            errors.append(f"{path}: {error}")
+    raise NoMissionAnswered(f"no running mission answered ({'; '.join(errors)})")
 
 
 def find_running_sockets(directory: Path) -> list[Path]:

@@ -15,7 +15,9 @@ Run JSON fields (CONTRACTS.md), all times in mission seconds:
 Extra fields: `reason` (when not completed), `exit_status`, `per_uav` (tracking, control and
 landing errors, final phase), `budget` (smoothing window and bound, worst control error,
 navigation noise, against rho_c), `setpoints` (sent, achieved rate, p99 period jitter), `events`
-(the monitors' errors and warnings), `radio` (when the radio medium ran: `gcs.sim.radio`).
+(the monitors' errors and warnings), `radio` (when the radio medium ran: `gcs.sim.radio`),
+`stations` (a stations mission: each point's holder and time on station, when the return
+started, the connectivity while everyone held; docs/outputs.md).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from typing import Any
 from rich.console import Group
 from rich.table import Table
 
-from gcs.flight.core import RunResult
+from gcs.flight.core import RunResult, StationsResult
 
 EXIT_COMPLETED, EXIT_ABORTED = 0, 1
 
@@ -91,6 +93,8 @@ def run_json(result: RunResult, log_path: str, safety_margin: float) -> dict[str
     }
     if result.radio is not None:  # the radio medium ran (CONTRACTS.md)
         out["radio"] = result.radio
+    if result.stations is not None:
+        out["stations"] = stations_json(result.stations)
     if not result.completed:
         out["reason"] = result.reason or "the mission did not complete"
     return out
@@ -118,6 +122,16 @@ def summary_renderable(result: RunResult, log_path: str, safety_margin: float) -
     )
     connected = result.connected_fraction
     top.add_row("connected", "n/a" if connected is None else f"{100 * connected:.1f} % of samples")
+    stations = result.stations
+    if stations is not None:
+        back, held = stations.return_s, stations.held_connected_fraction
+        top.add_row(
+            "return home", "not flown" if back is None else f"from mission time {back:.2f} s"
+        )
+        top.add_row(
+            "connected on station",
+            "n/a" if held is None else f"{100 * held:.1f} % of samples while everyone held",
+        )
     if result.radio is not None:
         top.add_row("radio medium", radio_line(result.radio))
     rate = result.setpoint_rate_hz
@@ -154,6 +168,8 @@ def summary_renderable(result: RunResult, log_path: str, safety_margin: float) -
             _fmt(result.landing_error_m[i]),
         )
     parts: list[Any] = [top, budget]
+    if result.stations is not None:
+        parts.append(stations_table(result.stations))
 
     if result.speed_changes:
         speeds = Table(title="speed changes (T_dv = request -> acknowledgement, mission s)")
@@ -184,6 +200,27 @@ def summary_renderable(result: RunResult, log_path: str, safety_margin: float) -
             events.add_row("", "", f"... {len(bad) - 30} more in the log")
         parts.append(events)
     return Group(*parts)
+
+
+def stations_json(stations: StationsResult) -> dict[str, Any]:
+    """The run JSON's `stations` object (docs/outputs.md)."""
+    return {
+        "points": [
+            {"name": p.name, "uav": p.uav, "on_station_s": p.on_station_s} for p in stations.points
+        ],
+        "return_s": _num(stations.return_s),
+        "held_connected_fraction": _num(stations.held_connected_fraction),
+    }
+
+
+def stations_table(stations: StationsResult) -> Table:
+    """The human table of a stations mission: each point, its UAV and time on station."""
+    table = Table(title="points held")
+    for name in ("point", "UAV", "on station"):
+        table.add_column(name, justify="right")
+    for point in stations.points:
+        table.add_row(point.name, str(point.uav), _fmt(point.on_station_s, "s", 1))
+    return table
 
 
 def radio_line(radio: dict) -> str:

@@ -44,13 +44,14 @@ leaders stop first, the followers close up behind them. So V_n(S) = eq. 27's V_n
 with the cap S_n = s_n + (n-1) dS_r, and its thresholds at and beyond the cap collapse onto it
 (min(L_{k,n}, S_n)); the jumps stay e_k - e_{k-1}, whose sum over the collapsed ones is minus
 the direction UAV n arrives with: the merged group is the stop. Everyone holds from
-S_out = max S_n (UAV N's, as the gaps are at most dS_r), for any larger S: the hold needs no
-speed 0. The fleet flies home from M = `return_distance` (set when the return is decided,
-`with_return`): V_n(S) = V_n(2 M - S) for S in [M, 2 M], the motion so far played backwards
-(from the hold when M >= S_out: UAV N, nearest A, leaves first), the thresholds truncated at M
-and extended by the mirrored 2 M - L_{k,n} (k descending) with the jumps in reverse order; at
-S >= 2 M everyone is parked on its start slot again. S stays monotone in time and the closed
-forms below apply unchanged.
+S_out = max S_n (UAV N's, as the gaps are at most dS_r), for any larger S. The fleet flies home
+from M = `return_distance` (set when the return is decided, `with_return`): V_n(S) =
+V_n(2 M - S) for S in [M, 2 M], the motion so far played backwards, the thresholds truncated at
+M and extended by the mirrored 2 M - L_{k,n} (k descending) with the jumps in reverse order; at
+S >= 2 M everyone is parked on its start slot again. A hold played backwards is as long again,
+so the ground station stops S at S_out while the fleet holds (speed 0) and returns from
+M = S_out (UAV N, nearest A, leaves first); M < S_out is a return before everyone is on station.
+S stays monotone in time and the closed forms below apply unchanged.
 """
 
 from __future__ import annotations

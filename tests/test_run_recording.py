@@ -24,6 +24,7 @@ from gcs.flight.clock import MissionClock
 from gcs.flight.records import (
     MetricsRecord,
     RadioRecord,
+    ReturnRecord,
     SetpointRecord,
     SpeedRecord,
     SpeedRecordKind,
@@ -161,6 +162,7 @@ def test_topics_schemas_and_the_shared_time_base(tmp_path: Path):
         (UavStateRecord, "state"),
         (SpeedRecord, "speed"),
         (MetricsRecord, "metrics"),
+        (ReturnRecord, "return"),
     ],
 )
 def test_the_core_records_and_the_topic_schemas_name_the_same_fields(record, schema_key):

@@ -27,6 +27,7 @@ from gcs.errors import EXIT_BAD_INPUT, InputError
 GROUPS: tuple[str, ...] = (
     "gcs.cli.cmd_mission",
     "gcs.cli.cmd_speed",
+    "gcs.cli.cmd_return",
     "gcs.cli.cmd_log",
     "gcs.cli.cmd_sitl",
     "gcs.cli.cmd_eval",

@@ -287,6 +287,10 @@ def run_command(args: argparse.Namespace) -> int:
         operator = OperatorSocket(socket_path_for(log_path))
         stack.callback(operator.close)
         timing = DriverTiming(speedup=args.speedup)
+        # where each UAV lands: its arrival slot, or its start slot after a stations mission
+        landing_slots = (
+            formation.goal_slots if formation.stations is None else formation.start_slots
+        )
         drivers = []
         for index, url in enumerate(urls):
             uav = index + 1
@@ -308,7 +312,7 @@ def run_command(args: argparse.Namespace) -> int:
                 url=url,
                 origin=mission.origin,
                 start_slot=formation.start_slots[index],
-                goal_slot=formation.goal_slots[index],
+                goal_slot=landing_slots[index],
                 altitude=mission.altitude,
             )
             drivers.append(family(spec, link, timing))

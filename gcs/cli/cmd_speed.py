@@ -3,7 +3,8 @@
 The running `gcs mission run` listens on a Unix socket next to its log, `<log>.sock` (owner-only
 permissions). Without `--socket` or `--log`, the newest socket under `./logs/` is used.
 Exit statuses (CONTRACTS.md): 0 accepted (prints the sequence number and the effective time),
-1 refused by the mission or no mission running, 2 bad input.
+1 refused by the mission or no mission running, 2 bad input. `add_mission_arguments` and
+`ask` are shared with `gcs return` (`gcs.cli.cmd_return`).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import argparse
 import json
 import math
 import sys
-from pathlib import Path
+from collections.abc import Callable
 
 from gcs.errors import InputError
 
@@ -33,14 +34,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--at", type=str, metavar="T", help="effective mission time, s (default: the earliest)"
     )
+    add_mission_arguments(parser)
+    parser.set_defaults(handler=speed_command)
+
+
+def add_mission_arguments(parser: argparse.ArgumentParser) -> None:
+    """`--socket PATH | --log LOG` (which running mission) and `--json`."""
+    from pathlib import Path
+
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--socket", type=Path, metavar="PATH", help="the mission's socket")
     where.add_argument("--log", type=Path, metavar="LOG", help="the running mission's --log file")
     parser.add_argument("--json", action="store_true", help="print the mission's answer as JSON")
-    parser.set_defaults(handler=speed_command)
 
 
-def _number(text: str, flag: str, minimum: float | None = None) -> float:
+def number(text: str, flag: str, minimum: float | None = None) -> float:
+    """A finite number (`minimum` or more) from a flag's text; bad input names `flag`."""
     try:
         value = float(text)
     except ValueError:
@@ -51,40 +60,37 @@ def _number(text: str, flag: str, minimum: float | None = None) -> float:
     return value
 
 
-def speed_command(args: argparse.Namespace) -> int:
-    from gcs.speed import find_running_sockets, send_operator_request, socket_path_for
+def ask(
+    args: argparse.Namespace, request: dict, command: str, accepted: Callable[[dict], str]
+) -> int:
+    """Send `request` to the running mission (`--socket`, `--log` or the newest under
+    ./logs), print its answer (`--json`: as JSON on stdout; `accepted(answer)` on success, the
+    reason of a refusal on stderr), return the exit status."""
+    from gcs.speed import NoMissionAnswered, ask_running_mission
 
-    speed = _number(args.speed, "V", 0.0)
-    at = None if args.at is None else _number(args.at, "--at")
-    if args.socket is not None:
-        candidates = [args.socket]
-    elif args.log is not None:
-        candidates = [socket_path_for(args.log)]
-    else:
-        candidates = find_running_sockets(Path("logs"))
-    if not candidates:
-        print(
-            "gcs speed: no running mission (no socket under ./logs; use --socket or --log)",
-            file=sys.stderr,
-        )
+    try:
+        answer = ask_running_mission(request, socket_path=args.socket, log_path=args.log)
+    except NoMissionAnswered as error:
+        print(f"gcs {command}: {error}", file=sys.stderr)
         return EXIT_REFUSED
-    errors = []
-    for path in candidates:
-        try:
-            answer = send_operator_request(path, speed, at)
-        except (OSError, ValueError) as error:
-            errors.append(f"{path}: {error}")
-            continue
-        if args.json:
-            print(json.dumps(answer))
-        if answer.get("ok"):
-            print(
-                f"speed change {answer['seq']}: {answer['speed']:g} m/s at mission time "
-                f"{answer['effective_s']:.2f} s",
-                file=sys.stderr if args.json else sys.stdout,
-            )
-            return EXIT_OK
-        print(f"gcs speed: refused: {answer.get('reason')}", file=sys.stderr)
-        return EXIT_REFUSED
-    print(f"gcs speed: no running mission answered ({'; '.join(errors)})", file=sys.stderr)
+    if args.json:
+        print(json.dumps(answer))
+    if answer.get("ok"):
+        print(accepted(answer), file=sys.stderr if args.json else sys.stdout)
+        return EXIT_OK
+    print(f"gcs {command}: refused: {answer.get('reason')}", file=sys.stderr)
     return EXIT_REFUSED
+
+
+def speed_command(args: argparse.Namespace) -> int:
+    speed = number(args.speed, "V", 0.0)
+    at = None if args.at is None else number(args.at, "--at")
+    request = {"speed": speed} if at is None else {"speed": speed, "at": at}
+
+    def accepted(answer: dict) -> str:
+        return (
+            f"speed change {answer['seq']}: {answer['speed']:g} m/s at mission time "
+            f"{answer['effective_s']:.2f} s"
+        )
+
+    return ask(args, request, "speed", accepted)

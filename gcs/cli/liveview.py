@@ -4,7 +4,8 @@ state, the formation's speed, the latest events, and an operator prompt.
 Shown on stderr when it is a terminal. When stdin is a terminal too, it is switched to cbreak
 mode (no echo, no line buffering; restored on close) and read without blocking at every tick:
 typing `5` and Enter asks for 5 m/s at the earliest effective time, `5 @120` for mission time
-120 s, `land` lands everyone where they are.
+120 s, `return` (a stations mission) brings the fleet home (`return @300`: from mission time
+300 s), `land` lands everyone where they are.
 """
 
 from __future__ import annotations
@@ -94,9 +95,18 @@ class LiveView:
         clock = "connecting" if t is None else f"t = {t:8.2f} s"
         frozen = f"  [yellow]frozen ({run.frozen_by})[/]" if run.frozen_by else ""
         aborting = "  [bold red]LANDING EVERYONE[/]" if run.aborting else ""
+        stations = run.formation.stations is not None
+        if not stations:
+            where = ""
+        elif run.returned is not None:
+            where = f"  [cyan]returning (from t={run.returned.effective_s:.1f} s)[/]"
+        elif run.on_station:
+            where = "  [green]on station[/]"
+        else:
+            where = "  outbound"
         header = Text.from_markup(
             f"[bold]{run.mission.name}[/]  {clock}  speed {run.current_speed:.1f} m/s  "
-            f"x{run.options.speedup:g}{frozen}{aborting}"
+            f"x{run.options.speedup:g}{where}{frozen}{aborting}"
         )
         table = Table(expand=False)
         for name in ("UAV", "phase", "mode", "armed", "alt (m)", "track err (m)", "link"):
@@ -134,7 +144,8 @@ class LiveView:
         events = [Text(text, style=_LEVEL_STYLE.get(level, "")) for level, text in self._messages]
         parts = [header, table, distances, *events]
         if self.interactive:
-            parts.append(Text(f"speed m/s [@T] | land > {self._typed}_", style="bold"))
+            back = " | return [@T]" if stations and run.returned is None else ""
+            parts.append(Text(f"speed m/s [@T]{back} | land > {self._typed}_", style="bold"))
         return Group(*parts)
 
 

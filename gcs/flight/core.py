@@ -23,6 +23,19 @@ At each tick the core:
    velocity, acceleration; DESIGN 3.5), converted for the whole fleet at once;
 4. steps the drivers (handshakes, retransmissions), runs the monitors, records.
 
+Monitoring-station missions (`formation.stations`, use case 1): the formation caps each UAV
+on its station, so from the outbound distance S_out on every UAV holds there; nobody lands on
+a station, the setpoints keep flowing. The formation then stops (speed 0, `_hold_due`), so
+that S stays at S_out: the return plays the flight up to S backwards, and distance run while
+holding would be played back as more holding. The return home (`_return_home`, whoever asks:
+the mission's `return.at`, the end of every point's `dwell_s`, the operator with `gcs return`
+or `return` typed in the live view, or at once when `RunOptions.return_when_on_station` and
+nothing else applies) stops S at the effective time t_e (speed 0), plays the flight so far
+backwards from M = S(t_e) (`LineFormation.with_return`) and restores the speed one smoothing
+window later: the reversal's velocity jump is two steps, each within the smoothing budget.
+Each UAV then lands on its start slot when it gets there (the landing rule, with the returning
+formation's arrival slots); a UAV the return reached before it left its slot stays down.
+
 If the loop stalls, the setpoints stop and the vehicles' own failsafes see it; once it runs
 again the mission clock stands still while the backlog is read, then the mission resumes where
 the UAVs stopped (`_resume_after_stall`), so that they are not asked to catch up: the mission
@@ -53,6 +66,7 @@ from gcs.flight.clock import MissionClock, VehicleClock, paused
 from gcs.flight.records import (
     MetricsRecord,
     RadioRecord,
+    ReturnRecord,
     SetpointRecord,
     SpeedRecord,
     SpeedRecordKind,
@@ -69,6 +83,7 @@ from gcs.speed import (
     SpeedChanges,
     SpeedRefused,
 )
+from planner.formation import DISTANCE_TOLERANCE
 from planner.kinematics import (
     Reference,
     SpeedProfile,
@@ -104,6 +119,19 @@ STALL_WALL_FLOOR_S = 0.25
 STILL_BEFORE_LANDING_S = 0.5
 #: After the last landing, how long (wall s) the GCS waits for disarming and commands in flight.
 SETTLE_WALL_S = 3.0
+#: Why an operator's speed change is refused while a stations mission's fleet holds.
+_HOLDING = (
+    "every UAV holds its station: the formation stands still until the return (gcs return); "
+    "speed changes apply from then on"
+)
+#: Who brings a stations mission's fleet home (`ReturnRecord.source`), in words.
+_RETURN_SOURCES = {
+    "schedule": "the mission's return.at",
+    "dwell": "once the longest dwell_s is over",
+    "on_station": "as soon as every UAV is on station: no return.at, not every point has a "
+    "dwell_s, and nobody to ask",
+    "operator": "asked by the operator",
+}
 
 
 @dataclass(frozen=True)
@@ -127,6 +155,10 @@ class RunOptions:
     #: before take-off, "cap" (re-plan with the autopilot's limits: `replan`), or "apply"
     #: (set the autopilots' limits for the flight, put back after landing).
     autopilot_limits: str = "refuse"
+    #: A stations mission with neither `return.at` nor a `dwell_s` on every point returns as
+    #: soon as every UAV is on station (the fast mode: nobody to ask); otherwise it holds until
+    #: the operator asks (`gcs return`).
+    return_when_on_station: bool = False
 
 
 @dataclass
@@ -157,6 +189,34 @@ class Stall:
     paused_at: float
     resumed_at: float
     held_back_s: float
+
+
+@dataclass(frozen=True)
+class PointHeld:
+    """One monitoring point of a stations mission (visiting order): the UAV that holds it
+    and the mission seconds its reported position was within rho_c of the point while its
+    virtual target held there."""
+
+    name: str
+    uav: int
+    on_station_s: float
+
+
+@dataclass(frozen=True)
+class StationsResult:
+    """What a stations mission reports: its points, the effective mission time of the return
+    (None: never returned), and the fraction of the connectivity samples taken while every
+    virtual target held its station (from S_out until the first UAV leaves for home, one
+    smoothing window after the return) at which every UAV was chained to a base station
+    (None: no such sample)."""
+
+    points: tuple[PointHeld, ...]
+    return_s: float | None
+    held_connected_fraction: float | None
+
+
+class ReturnRefused(ValueError):
+    """A return home that cannot be flown (the reason is the message)."""
 
 
 @dataclass
@@ -193,6 +253,7 @@ class RunResult:
     telemetry_shed: int = 0  # stale telemetry datagrams of backlogs, not decoded
     #: The mission assumed more than an autopilot allows and was refused before take-off.
     limits_refused: list[LimitExceeded] = field(default_factory=list)
+    stations: StationsResult | None = None  # stations missions only
 
 
 class View(Protocol):
@@ -242,6 +303,8 @@ class Recorder(Protocol):
 
     def radio(self, record: RadioRecord, wall: float) -> None: ...
 
+    def return_home(self, record: ReturnRecord, wall: float) -> None: ...
+
 
 @dataclass(frozen=True, eq=False)
 class _Evaluation:
@@ -275,6 +338,9 @@ class NullRecorder:
         return None
 
     def radio(self, record: RadioRecord, wall: float) -> None:
+        return None
+
+    def return_home(self, record: ReturnRecord, wall: float) -> None:
         return None
 
     def fix(self, uav: int, lat: float, lon: float, alt: float, wall: float) -> None:
@@ -339,6 +405,24 @@ class GroundStation:
         self.stalls: list[Stall] = []
         self.tracking_now = np.full(size, np.nan)
         self.mission_time = None
+        # stations missions
+        self.returned: ReturnRecord | None = None  # the return home, once asked
+        self._hold: tuple[float, float] | None = None  # stopped on station: (from t, speed)
+        self._planned_return_done = False  # the mission's own return was issued (or refused)
+        self.on_station = False  # every UAV holds its station now (until the return)
+        self._on_station_noted = False
+        self._on_station_s = np.zeros(size)  # per UAV, see `PointHeld`
+        self._last_station_tick: float | None = None
+        self._held_samples = 0
+        self._held_connected = 0
+        if self._station_xy is not None:
+            planned = self._planned_return()
+            if planned is None:
+                log.info("stations mission: the fleet holds its stations until the operator "
+                         "asks for the return (gcs return)")  # fmt: skip
+            else:
+                log.info("stations mission: the fleet returns home by itself (%s)",
+                         _RETURN_SOURCES[planned[1]])  # fmt: skip
 
     def _adopt(self, plan) -> None:
         """Fly `plan`: everything derived from it (at construction, or re-planned before
@@ -358,7 +442,7 @@ class GroundStation:
             max_speed=plan.speeds.max, window_s=self.window_s, schedule=schedule
         )
         self._records: list[SpeedBroadcast] = []
-        stations = [mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations]
+        stations = mission.base_station_points
         self.safety = SafetyMonitor(
             fleet_size=plan.formation.fleet_size,
             obstacles=mission.obstacles,
@@ -368,6 +452,9 @@ class GroundStation:
             vehicle_radius=mission.vehicle.radius,
         )
         self.current_speed = plan.speeds.initial
+        # where each UAV holds (stations missions; the outbound formation's, fixed)
+        stations = self.formation.stations is not None
+        self._station_xy = self.formation.station_slots if stations else None
 
     # ------------------------------------------------------------------ public
     @property
@@ -553,6 +640,8 @@ class GroundStation:
             return {"ok": False, "reason": error}
         if self.aborting:
             return {"ok": False, "reason": f"the fleet is landing ({self.reason})"}
+        if self._holding():
+            return {"ok": False, "reason": _HOLDING}
         t = self.clock.mission_time(now) if self.clock.anchored else 0.0
         try:
             change = self.speeds.request(speed, t, "operator", at)
@@ -566,8 +655,21 @@ class GroundStation:
             "speed": change.speed,
         }
 
+    def operator_return(self, at: float | None, error: str | None, now: float) -> dict:
+        """A request of `gcs return` (the operator socket); returns the answer to send back:
+        `{"ok": true, "effective_s": t_e, "distance": M}` or `{"ok": false, "reason": ...}`."""
+        if error:
+            return {"ok": False, "reason": error}
+        if not self.clock.anchored:
+            return {"ok": False, "reason": "the fleet is not flying yet"}
+        try:
+            record = self._return_home(self.clock.mission_time(now), now, at, "operator")
+        except ReturnRefused as refused:
+            return {"ok": False, "reason": str(refused)}
+        return {"ok": True, "effective_s": record.effective_s, "distance": record.distance}
+
     def operator_command(self, line: str, now: float) -> None:
-        """A line typed in the live view: a speed (m/s) [@T], or 'land'."""
+        """A line typed in the live view: a speed (m/s) [@T], return [@T], or 'land'."""
         if self.clock.anchored and not self.aborting:
             self._operator_command(line, self.clock.mission_time(now), now)
 
@@ -587,7 +689,11 @@ class GroundStation:
             driver.step(now)
         self._collect_acks(now)
         self._drain_driver_events(now)
+        samples = self.safety.stats.samples
         self._monitor(t, now, evaluation)
+        if self._station_xy is not None:
+            sampled = self.safety.stats.samples > samples
+            self._watch_stations(t, now, evaluation, sampled)
         self._link_policy(t, now)
 
     def finished(self, now: float) -> bool:
@@ -717,10 +823,191 @@ class GroundStation:
                 source = f"leader:{request.uav_id}"
                 if not self._deferred(request.speed, t, source, now):
                     self._issue(request.speed, t, source, now)
+        if self._station_xy is not None:
+            if not self._planned_return_done:
+                self._planned_return_due(t, now)
+            if self._hold is None and self.returned is None:
+                self._hold_due(t, now)
+
+    # ------------------------------------------------------------------ stations missions
+    def _planned_return(self) -> tuple[float, str] | None:
+        """When the mission itself brings the fleet home (the effective time asked, and the
+        source), under the profile flown so far; None: when the operator asks."""
+        mission = self.mission
+        if mission.return_at is not None:
+            return float(mission.return_at), "schedule"
+        on_station = self._on_station_time()
+        dwells = [point.dwell_s for point in mission.stations]
+        if dwells and min(dwells) > 0:
+            return on_station + max(dwells), "dwell"
+        if self.options.return_when_on_station:
+            return on_station, "on_station"
+        return None
+
+    def _on_station_time(self) -> float:
+        """When every UAV is (or will be) on station: Phi(S_out), inf while frozen before."""
+        if self._hold is not None:
+            return self._hold[0]
+        return float(self.profile.time_at_distance(self.formation.outbound_distance))
+
+    def _holding(self) -> bool:
+        """The formation stands still with every UAV on its station, waiting for the return."""
+        return self._hold is not None and self.returned is None
+
+    def _hold_due(self, t: float, now: float) -> None:
+        """The formation stops (speed 0, source "hold") once every UAV is on station, issued
+        ahead as a scheduled change: S stays at S_out, so that whenever the return comes it
+        starts from there (`with_return(M)` plays back the flight up to M, and the distance
+        run while holding would be played back as more holding). The speed it had is the one
+        the way home flies at."""
+        if self.frozen_by is not None:
+            return  # standing still already; resumed, the hold is due again
+        at = self._on_station_time()
+        if at - self.speeds.lead_s - self.speeds.announce_s > t:  # (inf while frozen)
+            return
+        speed = float(self.profile.speed_at(at))
+        change = self._issue(0.0, t, "hold", now, at=max(at, self.speeds.earliest(t)))
+        if change is not None:
+            self._hold = (change.effective_s, speed)
+
+    def _planned_return_due(self, t: float, now: float) -> None:
+        """Issue the mission's own return ahead of its time, as a scheduled speed change."""
+        if self.returned is not None:
+            self._planned_return_done = True  # the operator asked first
+            return
+        planned = self._planned_return()
+        if planned is None:
+            self._planned_return_done = True
+            return
+        at, source = planned
+        if at - self.speeds.lead_s - self.speeds.announce_s > t:  # (inf while frozen)
+            return
+        self._planned_return_done = True
+        try:
+            self._return_home(t, now, at, source)
+        except ReturnRefused as refused:
+            text = f"{source}: return refused: {refused}"
+            self._event(MonitorEvent(t, "warning", "return_refused", text), now)
+
+    def _return_home(self, t: float, now: float, at: float | None, source: str) -> ReturnRecord:
+        """The return home of a stations mission, asked at mission time `t` by `source` for
+        effective time `at` (None: the earliest): from t_e = max(at, the earliest a speed
+        change may take effect) the formation stands still at M = S(t_e) (a speed change to
+        0), flies its way out backwards from there (`LineFormation.with_return(M)`), and one
+        smoothing window later gets back the speed it had (each UAV's velocity reverses in two
+        steps, each within the smoothing budget). Raises `ReturnRefused`."""
+        formation = self.formation
+        if formation.stations is None:
+            raise ReturnRefused(
+                "this mission has no stations: the fleet flies from A to B and lands there"
+            )
+        if self.aborting:
+            raise ReturnRefused(f"the fleet is landing ({self.reason})")
+        if self.returned is not None:
+            returned = self.returned
+            raise ReturnRefused(
+                f"the fleet is already returning (from t={returned.effective_s:.2f} s, "
+                f"{_RETURN_SOURCES[returned.source]})"
+            )
+        if at is not None and not math.isfinite(at):
+            raise ReturnRefused(f"the return time must be a finite mission time, got {at!r}")
+        earliest = self.speeds.earliest(t)
+        effective = earliest if at is None else max(float(at), earliest)
+        # the speed in force before (holding: the one it had when it stopped on station)
+        speed = self._hold[1] if self._holding() else float(self.profile.speed_at(effective))
+        self._apply(self.speeds.request(0.0, t, "return", effective), now)
+        distance = float(self.profile.distance(effective))
+        self.formation = formation.with_return(distance)
+        record = ReturnRecord(t=t, effective_s=effective, distance=distance, source=source)
+        self.returned = record
+        if self.frozen_by == "operator" and source == "operator":
+            self.frozen_by = None  # the operator decided
+        if self.frozen_by is not None:  # the return flies when the formation resumes
+            if speed > 0:
+                self._resume_speed = speed
+        elif speed > 0:
+            back = max(effective + self.window_s, self.speeds.earliest(t))
+            self._apply(self.speeds.request(speed, t, "return", back), now)
+        self.recorder.return_home(record, now)
+        text = (
+            f"return home ({_RETURN_SOURCES[source]}): from t={effective:.2f} s every UAV flies "
+            f"its way out backwards to its start slot (formation distance {distance:.1f} m)"
+        )
+        self._event(MonitorEvent(t, "info", "return", text), now)
+        return record
+
+    def _watch_stations(self, t: float, now: float, evaluation: _Evaluation, sampled: bool):
+        """Time on station per UAV (its reported position within rho_c of its station while
+        its virtual target holds there), the connectivity while everyone holds, and the event
+        when everyone is on station."""
+        dt = 0.0 if self._last_station_tick is None else max(t - self._last_station_tick, 0.0)
+        self._last_station_tick = t
+        slots = self._station_xy
+        held = np.hypot(*(evaluation.virtual[0] - slots).T) <= DISTANCE_TOLERANCE
+        reported = np.full((self.size, 2), np.nan)
+        for index, driver in enumerate(self.drivers):
+            position = driver.telemetry.position_enu
+            if position is not None and not self.links.lost[index]:
+                reported[index] = position[:2]
+        with np.errstate(invalid="ignore"):
+            near = np.hypot(*(reported - slots).T) <= self.mission.safety_margin
+        self._on_station_s += dt * (held & near)
+        # everyone holds from S_out until UAV N leaves its station again, at 2 M - S_out
+        distance = float(evaluation.distances[0])
+        outbound = self.formation.outbound_distance
+        leaves = math.inf if self.returned is None else 2 * self.returned.distance - outbound
+        holding = outbound - DISTANCE_TOLERANCE <= distance <= leaves + DISTANCE_TOLERANCE
+        if holding and sampled:
+            self._held_samples += 1
+            self._held_connected += int(bool(self.safety.stats.last_connected))
+        self.on_station = holding
+        if holding and not self._on_station_noted:
+            self._on_station_noted = True
+            self._event(MonitorEvent(t, "info", "on_station", self._on_station_text(t)), now)
+
+    def _on_station_text(self, t: float) -> str:
+        text = f"every UAV on station at t={t:.2f} s: "
+        if self.returned is not None:
+            leaves = 2 * self.returned.distance - self.formation.outbound_distance
+            at = float(self.profile.time_at_distance(leaves))
+            return text + f"the first leaves for home at t={at:.2f} s (the return)"
+        planned = self._planned_return()
+        if planned is None:
+            return text + "holding until the operator asks (gcs return, or type 'return')"
+        at, source = planned
+        return text + f"holding until t={at:.2f} s ({_RETURN_SOURCES[source]})"
+
+    def _stations_result(self) -> StationsResult | None:
+        route = self.plan.route
+        if self._station_xy is None or route is None or route.layout is None:
+            return None
+        points = tuple(
+            PointHeld(
+                name=self.mission.stations[index].name,
+                uav=int(uav),
+                on_station_s=float(self._on_station_s[int(uav) - 1]),
+            )
+            for index, uav in zip(route.order.tolist(), route.layout.holders.tolist(), strict=True)
+        )
+        held = self._held_connected / self._held_samples if self._held_samples else None
+        return StationsResult(
+            points=points,
+            return_s=None if self.returned is None else self.returned.effective_s,
+            held_connected_fraction=held,
+        )
 
     def _deferred(self, speed: float, t: float, source: str, now: float) -> bool:
         """While the formation is frozen, a scheduled or leader change is not flown: it becomes
-        the speed the formation resumes with (only the operator unfreezes it)."""
+        the speed the formation resumes with (only the operator unfreezes it). While every UAV
+        holds its station, it becomes the speed of the way home."""
+        if self._holding():
+            self._hold = (self._hold[0], speed)
+            text = (
+                f"{source}: {speed:g} m/s deferred, every UAV holds its station; the fleet "
+                "flies home at that speed"
+            )
+            self._event(MonitorEvent(t, "warning", "speed_deferred", text), now)
+            return True
         if self.frozen_by is None:
             return False
         self._resume_speed = speed
@@ -739,12 +1026,21 @@ class GroundStation:
             self.land_everyone("the operator asked everyone to land", now)
             return
         try:
-            speed = float(words[0])
             at = float(words[1].lstrip("@")) if len(words) > 1 else None
+            speed = None if words[0] == "return" else float(words[0])
         except ValueError:
             self.view.message(
-                "warning", f"type a speed (m/s) [@T], or 'land'; not {line.strip()!r}"
+                "warning", f"type a speed (m/s) [@T], return [@T], or land; not {line.strip()!r}"
             )
+            return
+        if speed is None:
+            try:
+                self._return_home(t, now, at, "operator")
+            except ReturnRefused as refused:
+                self.view.message("warning", f"return refused: {refused}")
+            return
+        if self._holding():
+            self.view.message("warning", _HOLDING)
             return
         try:
             change = self.speeds.request(speed, t, "operator", at)
@@ -813,11 +1109,31 @@ class GroundStation:
         arrivals = self.profile.time_at_distance(formation.arrival_distance)
         lead = self.takeoff_lead_s()
         horizon = t + self.speeds.lead_s + 2 * self.tick_period_wall * self.options.speedup
+        # a stations formation holds its UAVs on their stations until it returns
+        lands = formation.stations is None or formation.returning
+        # returning before a UAV left its slot: it never leaves it
+        stays = (
+            formation.departure_distance >= formation.return_distance - DISTANCE_TOLERANCE
+            if formation.returning
+            else np.zeros(self.size, dtype=bool)
+        )
         late = []
         for index, driver in enumerate(self.drivers):
             track = self.tracks[index]
             if self.aborting:
                 break
+            if stays[index]:
+                if not track.land_sent:
+                    track.land_sent = True
+                    driver.land(now)
+                    text = (
+                        f"UAV {index + 1} lands back on its start slot: the return came before "
+                        "it left it"
+                        if track.takeoff_sent
+                        else f"UAV {index + 1} stays on its start slot: the return came first"
+                    )
+                    self._event(MonitorEvent(t, "info", "stays", text, index + 1), now)
+                continue
             if not track.takeoff_sent and t >= departures[index] - lead:
                 track.takeoff_sent = True
                 track.takeoff_time = t
@@ -826,7 +1142,8 @@ class GroundStation:
             if not_up and departures[index] <= horizon:
                 late.append(driver.uav_id)
             if (
-                driver.phase == Phase.FOLLOWING
+                lands
+                and driver.phase == Phase.FOLLOWING
                 and not track.land_sent
                 and t >= arrivals[index] + self.window_s / 2 + STILL_BEFORE_LANDING_S
             ):
@@ -1274,6 +1591,7 @@ class GroundStation:
             stalls=list(self.stalls),
             telemetry_shed=sum(getattr(d.link.counters, "stale", 0) for d in self.drivers),
             limits_refused=list(self.limits_refused),
+            stations=self._stations_result(),
         )
 
 

@@ -136,13 +136,16 @@ class LiveLoop:
             self.station.fleet_reports(now, self.fleet.poll(), reports)
 
     def _poll_operator(self, now: float) -> None:
-        """The operator socket (`gcs speed`) and the lines typed in the live view."""
+        """The operator socket (`gcs speed`, `gcs return`) and the lines typed in the live
+        view."""
         station = self.station
         if self.operator is not None:
             for request in self.operator.poll():
-                request.reply(
-                    station.operator_request(request.speed, request.at, request.error, now)
-                )
+                if request.command == "return":
+                    answer = station.operator_return(request.at, request.error, now)
+                else:
+                    answer = station.operator_request(request.speed, request.at, request.error, now)
+                request.reply(answer)
         for line in station.view.commands():
             station.operator_command(line, now)
 

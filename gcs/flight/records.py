@@ -155,3 +155,19 @@ class RadioRecord(_Record):
 
     def to_json(self) -> dict[str, Any]:
         return {**self.counters, "t": self.t}
+
+
+@_declare
+class ReturnRecord(_Record):
+    """The fleet's return home from its stations (topic `/return`, stations missions only):
+    asked at mission time `t` by `source` (`schedule`: the mission's `return.at`; `dwell`:
+    after every point's `dwell_s`; `on_station`: at once, nobody to ask; `operator`), flown
+    from `effective_s` on, the formation standing still at distance `distance` (M) for one
+    smoothing window before every UAV flies its way out backwards."""
+
+    ALWAYS: ClassVar[frozenset[str]] = frozenset({"t", "effective_s", "distance", "source"})
+
+    t: float
+    effective_s: float
+    distance: float  # M, m: V_n(S) = V_n(2 M - S) from there on
+    source: str

@@ -9,8 +9,8 @@ Topics. Foxglove's well-known schemas (protobuf), so its panels work without con
 * `/events` (`foxglove.Log`); `/map/obstacles` and `/map/plan` (`foxglove.GeoJSON`, lon/lat:
   building footprints and walls; path, rows, stations), repeated every `GEOJSON_PERIOD_S`.
 JSON with a titled JSON schema (`SCHEMAS`): `/plan`, `/uav<n>/setpoint`, `/uav<n>/state`,
-`/speed` (requests, acknowledgements), `/metrics` (per tick, with the fleet positions the
-monitors sampled), `/fleet` (per tick: the instant's smallest distances and radio links),
+`/speed` (requests, acknowledgements), `/return` (a stations mission's return home),
+`/metrics` (per tick, with the fleet positions the monitors sampled), `/fleet` (per tick: the instant's smallest distances and radio links),
 `/radio` (radio-medium counters, when a medium reports them), `/mavlink/<n>/rx|tx` (every
 MAVLink message: raw bytes in base64 plus the decoded fields).
 
@@ -57,6 +57,7 @@ from foxglove.messages import GeoJson, LocationFix, Log, LogLevel, SceneUpdate, 
 from gcs.flight.records import (
     MetricsRecord,
     RadioRecord,
+    ReturnRecord,
     SetpointRecord,
     SpeedRecord,
     UavStateRecord,
@@ -158,6 +159,11 @@ SCHEMAS: dict[str, dict] = {
             "reaction_s": _NUM,
         },
         ["t", "kind"],
+    ),
+    "return": _schema(
+        "fleetline.Return",
+        {"t": _NUM, "effective_s": _NUM, "distance": _NUM, "source": _STR},
+        ["t", "effective_s", "distance", "source"],
     ),
     "metrics": _schema(
         "fleetline.Metrics",
@@ -401,6 +407,10 @@ class FlightRecorder:
 
     def metrics(self, record: MetricsRecord, wall: float) -> None:
         self.write(self.channel("/metrics", "metrics"), record.to_json(), wall)
+
+    def return_home(self, record: ReturnRecord, wall: float) -> None:
+        """A stations mission's return home (`fleetline.Return` on `/return`)."""
+        self.write(self.channel("/return", "return"), record.to_json(), wall)
 
     def fix(self, uav: int, latitude: float, longitude: float, altitude: float, wall: float):
         """A `foxglove.LocationFix` on `/uav<n>/fix` (Foxglove's Map panel)."""

@@ -5,8 +5,9 @@ Everything is recomputed from what the log holds (DESIGN 5):
   the planner's guarantee checks (`planner.guarantees.check_positions`): smallest UAV-UAV and
   UAV-obstacle distance over time (the paper's figs. 8 and 9, D_min) and connectivity;
 * each UAV's true track (`/uav<n>/state`) against its virtual target V_n(t) (eq. 27), rebuilt
-  from the plan (`plan.json`) and the speed changes actually flown (`/speed`): the tracking
-  error per UAV, and the distance travelled against time next to the planned one (fig. 3);
+  from the plan (`plan.json`), the speed changes actually flown (`/speed`) and, for a stations
+  mission, its return home (`/return`): the tracking error per UAV, and the distance
+  travelled against time next to the planned one (fig. 3);
 * the map with the planned path and the flown tracks (fig. 7), drawn over `gcs.plot`'s map;
 * reaction time of each UAV to each speed change, T_dv (fig. 10);
 * packets received at the base stations over time, BS_con (figs. 12-13): the telemetry the
@@ -109,7 +110,7 @@ def load_flight(recording: Recording) -> Flight:
     epoch = recording.epoch_ns
     size = int(plan["fleet_size"])
     mission = _mission(recording)
-    formation = _formation(plan)
+    formation = _formation(plan, recording.first("/return"))
     requests = [m for _, m in recording.messages("/speed") if m.get("kind") == "request"]
     acks = [m for _, m in recording.messages("/speed") if m.get("kind") == "ack"]
     profile = SpeedProfile.constant(float(plan.get("initial_speed_mps") or plan["max_speed_mps"]))
@@ -217,26 +218,40 @@ def _mission(recording: Recording) -> Mission | None:
         return None
 
 
-def _formation(plan: dict) -> LineFormation | None:
-    """The line formation of the plan JSON (path, fleet size, parking rows)."""
+def _formation(plan: dict, returned: dict | None = None) -> LineFormation | None:
+    """The line formation of the plan JSON (path, fleet size, parking rows). A stations
+    mission's (no row at B, `stations.uav_stations_m`) is capped on its stations, and flies
+    home from the distance of the recording's `/return` record (`returned`) when it has one."""
     try:
+        path = np.array(plan["path"], float)
         start_row = np.array(plan["parking_rows"]["A"], float)
-        goal_row = np.array(plan["parking_rows"]["B"], float)
         e0 = start_row[0] - start_row[1]
-        ek = goal_row[1] - goal_row[0]
+        stations = None
+        if plan.get("stations"):
+            stations = np.array(plan["stations"]["uav_stations_m"], float)
+            goal_row = np.array([path[-1], path[-1]])  # open: no row beyond the last point
+            ek = path[-1] - path[-2]  # (never flown: every UAV stops on the route)
+        else:
+            goal_row = np.array(plan["parking_rows"]["B"], float)
+            ek = goal_row[1] - goal_row[0]
         rows = ParkingRows(
             start_row=start_row,
             goal_row=goal_row,
             start_direction=e0 / np.hypot(*e0),
             goal_direction=ek / np.hypot(*ek),
+            open_goal=stations is not None,
         )
-        return LineFormation(
-            path=np.array(plan["path"], float),
+        formation = LineFormation(
+            path=path,
             fleet_size=int(plan["fleet_size"]),
             safety_margin=float(plan["safety_margin_m"]),
             radio_range=float(plan["radio_range_m"]),
             rows=rows,
+            stations=stations,
         )
+        if stations is not None and returned is not None:
+            formation = formation.with_return(float(returned["distance"]))
+        return formation
     except (KeyError, ValueError, IndexError, TypeError):
         return None
 
@@ -245,8 +260,7 @@ def _formation(plan: dict) -> LineFormation | None:
 def _base_stations(flight: Flight) -> np.ndarray:
     mission = flight.mission
     if mission is not None:
-        stations = [mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations]
-        return np.array(stations, float)
+        return mission.base_station_points
     path = np.array(flight.plan["path"], float)
     return path[[0, -1]]
 

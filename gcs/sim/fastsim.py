@@ -10,16 +10,20 @@ data), in-memory links (`gcs.link.MemoryLink`), and simulated time as the loop's
 MAVLink message goes through the medium: a packet with no path is dropped, the others arrive
 after their hops' delay.
 
-Differences from a networked run: no recording (`log` is null), no signing, and the vehicles
-skip the telemetry streams the core does not read (attitude, battery, VFR_HUD, local position).
-The result is the run JSON of CONTRACTS.md plus the time series the paper's figures need,
-sampled from the true state of the simulation.
+Differences from a networked run: no recording unless asked (`FastOptions.log`; the run
+JSON's `log` is null without one, and the MAVLink topics are never written), no signing, and
+the vehicles skip the telemetry streams the core does not read (attitude, battery, VFR_HUD,
+local position). Nobody is there to ask a stations mission's fleet home: without `return.at`
+or a `dwell_s` on every point, it returns as soon as every UAV is on station
+(`RunOptions.return_when_on_station`). The result is the run JSON of CONTRACTS.md plus the
+time series the paper's figures need, sampled from the true state of the simulation.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -29,7 +33,7 @@ from gcs.drivers.sim import SimDriver
 from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, NullRecorder, RunOptions, RunResult
 from gcs.link import MemoryLink
-from gcs.planning import MissionPlan
+from gcs.planning import MissionPlan, plan_json
 from gcs.sim.radio import run_json_radio
 from gcs.summary import run_json
 from medium.ground_users import DEFAULT_PACKET_BYTES, GroundUser
@@ -69,6 +73,8 @@ class Faults:
     link_cuts: tuple[tuple[int, float, float], ...] = ()
     #: (when, speed, effective time or None): `gcs speed` requests of the operator
     operator_requests: tuple[tuple[float, float, float | None], ...] = ()
+    #: (when, effective time or None): `gcs return` requests of the operator
+    operator_returns: tuple[tuple[float, float | None], ...] = ()
     #: when the operator presses Ctrl-C
     interrupts: tuple[float, ...] = ()
 
@@ -91,6 +97,9 @@ class FastOptions:
     takeoff_lead_s: float | None = None  # as `gcs mission run --takeoff-lead`
     time_limit_s: float | None = None  # mission s; None: twice the planned duration + 300 s
     faults: Faults = field(default_factory=Faults)
+    #: an MCAP file to record the flight to, as `gcs mission run --log` (no MAVLink topics;
+    #: log time is simulated time, from the Unix epoch); slower: every sample is written
+    log: Path | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,12 +108,13 @@ class FastRun:
 
     `times` (T,) mission seconds of the samples; `positions` (T, N, 3) true; `hops` (T, N)
     from the medium (-1: no path); `checks` the planner's sampled guarantee metrics;
-    `tracking_error_m` (T, N) |true - V_n(t)|; `packets` the medium's packet log (time in
+    `tracking_error_m` (T, N) |true - V_n(t)|; `formation` the formation flown (a stations
+    mission's with its way home once it returned); `packets` the medium's packet log (time in
     mission s; `kind` indexes `medium.radio_stats.KINDS`); `speed_changes` each change with
     the mission time each UAV received it (`received_s`) and, for a leader's request, the time
     the leader sent it (`leader_sent_s`); `takeoff_s` and `landed_s` (N,) mission times (NaN:
-    never); `operator_answers` the answers to `Faults.operator_requests`; `stalls` the core's
-    stall records.
+    never); `operator_answers` the answers to `Faults.operator_requests` and
+    `operator_returns`, in the order asked; `stalls` the core's stall records.
     """
 
     run_json: dict
@@ -126,8 +136,16 @@ class FastRun:
 
 def with_fleet_size(plan: MissionPlan, fleet_size: int) -> MissionPlan:
     """The plan flown by `fleet_size` UAVs on the same path (a fleet smaller than eq. 28's
-    minimum breaks the connectivity guarantee: tests use it to show a disconnection)."""
+    minimum breaks the connectivity guarantee: tests use it to show a disconnection). A
+    stations plan is flown only by its own fleet, one UAV per station (ValueError otherwise)."""
     formation = plan.formation
+    if formation.stations is not None:
+        if fleet_size != formation.fleet_size:
+            raise ValueError(
+                f"a stations plan is flown by its {formation.fleet_size} UAVs, one per "
+                f"station, not {fleet_size}"
+            )
+        return plan
     return replace(
         plan,
         formation=LineFormation(
@@ -177,10 +195,8 @@ def radio_config(mission) -> RadioConfig:
 
 
 def base_stations(mission) -> np.ndarray:
-    """A, B and the extra base stations, (B, 2)."""
-    return np.array(
-        [mission.start.xy, mission.goal.xy] + [b.xy for b in mission.base_stations], dtype=float
-    )
+    """A, B (when the mission has one) and the extra base stations, (k, 2)."""
+    return mission.base_station_points
 
 
 class _LockstepMission:
@@ -229,6 +245,10 @@ class _LockstepMission:
             mavlink.MAVLink(None, srcSystem=uav, srcComponent=1) for uav in range(1, size + 1)
         ]
         self.links = [MemoryLink(f"memory:{uav}", uav) for uav in range(1, size + 1)]
+        # where each UAV lands: its arrival slot, or its start slot after a stations mission
+        landing_slots = (
+            formation.goal_slots if formation.stations is None else formation.start_slots
+        )
         drivers = [
             SimDriver(
                 UavSpec(
@@ -237,7 +257,7 @@ class _LockstepMission:
                     url=link.url,
                     origin=origin,
                     start_slot=formation.start_slots[k],
-                    goal_slot=formation.goal_slots[k],
+                    goal_slot=landing_slots[k],
                     altitude=mission.altitude,
                 ),
                 link,
@@ -250,9 +270,14 @@ class _LockstepMission:
             setpoint_rate_hz=mission.sim.setpoint_rate_hz,
             link_wait_s=options.link_wait_s,
             takeoff_lead_s=options.takeoff_lead_s,
+            return_when_on_station=True,  # nobody to ask for it
         )
-        self.station = GroundStation(plan, drivers, self.clock, NullRecorder(), run_options)
+        self.recorder = NullRecorder() if options.log is None else self._recorder(options.log)
+        self.station = GroundStation(plan, drivers, self.clock, self.recorder, run_options)
         planned = plan.duration_s if plan.duration_s and math.isfinite(plan.duration_s) else 600
+        if formation.stations is not None:  # out, the hold, and home
+            dwells = [point.dwell_s for point in mission.stations]
+            planned = 2 * planned + max(max(dwells), mission.return_at or 0.0)
         self.time_limit_s = (
             options.time_limit_s if options.time_limit_s is not None else 2 * planned + 300.0
         )
@@ -266,11 +291,32 @@ class _LockstepMission:
         self._positions: list[np.ndarray] = []
         self._hops: list[np.ndarray] = []
 
+    def _recorder(self, path: Path):
+        """A `FlightRecorder` on the simulated clock, the plan described."""
+        from gcs.logs.recording import FlightRecorder
+
+        recorder = FlightRecorder(path, self.clock, force=True)
+        recorder.describe(self.plan, plan_json(self.plan), 0.0)
+        return recorder
+
     def mission_time(self, sim_s: float) -> float:
         return self.clock.mission_time(sim_s) if self.clock.anchored else -math.inf
 
     # ------------------------------------------------------------------ the loop
     def run(self) -> FastRun:
+        """Fly, and the result; a recording (`FastOptions.log`) is closed whatever happens."""
+        try:
+            self._fly()
+            run = self._finish()
+            if self.options.log is not None:
+                run.run_json["log"] = str(self.options.log)
+                self.recorder.outcome(run.run_json)
+            return run
+        finally:
+            if self.options.log is not None:
+                self.recorder.close()
+
+    def _fly(self) -> None:
         fleet, station, faults = self.fleet, self.station, self.options.faults
         stalls = bool(faults.gcs_stalls)  # (most runs have none: no test per iteration)
         tick_period = 1.0 / station.options.setpoint_rate_hz
@@ -278,6 +324,7 @@ class _LockstepMission:
         next_sample = 0.0
         connected = False
         operator = sorted(faults.operator_requests)
+        returns = sorted(faults.operator_returns, key=lambda request: request[0])
         interrupts = sorted(faults.interrupts)
         while True:
             sim_s = fleet.sim_s
@@ -289,6 +336,9 @@ class _LockstepMission:
                 while operator and vehicle_t >= operator[0][0]:
                     _, speed, at = operator.pop(0)
                     self.operator_answers.append(station.operator_request(speed, at, None, sim_s))
+                while returns and vehicle_t >= returns[0][0]:
+                    _, at = returns.pop(0)
+                    self.operator_answers.append(station.operator_return(at, None, sim_s))
                 while interrupts and vehicle_t >= interrupts[0]:
                     interrupts.pop(0)
                     station.interrupt()
@@ -313,7 +363,6 @@ class _LockstepMission:
             self.medium.periodic(sim_s)
             for index, message in fleet.control_tick():
                 self._send_up(index, message, sim_s)
-        return self._finish()
 
     def _deliver(self, sim_s: float) -> None:
         """Deliver what is due: to the vehicles (their answers go up at once), and to the
@@ -399,7 +448,8 @@ class _LockstepMission:
         return changes
 
     def _finish(self) -> FastRun:
-        mission, formation, station = self.mission, self.formation, self.station
+        mission, station = self.mission, self.station
+        formation = station.formation  # a stations mission's with its way home
         times = np.array(self._times)
         positions = np.array(self._positions).reshape(len(times), self.size, 3)
         hops = np.array(self._hops).reshape(len(times), self.size)

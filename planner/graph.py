@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import shapely
 
-from planner.formation import ANGLE_TOLERANCE, DISTANCE_TOLERANCE, SQRT2
+from planner.formation import ANGLE_TOLERANCE, DISTANCE_TOLERANCE, SQRT2, row_direction
 
 if TYPE_CHECKING:
     from planner.types import PathProblem
@@ -98,9 +98,7 @@ def graph_nodes(problem: PathProblem) -> Nodes:
         # A leg's start (DESIGN 7): the route behind it is a wall kept 2 rho_c away, so it
         # gets nodes as a segment end does (eq. 39 with 2 rho_c: beyond it at +-45 degrees)
         # and beside it (a turn of 90 degrees, so that a leg can turn back in open space).
-        e0 = np.array(
-            [math.cos(ab + offsets[0] + math.pi / 2), math.sin(ab + offsets[0] + math.pi / 2)]
-        )
+        e0 = row_direction(start, goal, problem.start_angle_deg)
         normal = np.array([-e0[1], e0[0]])
         turns = 2.0 * rho * np.array([normal, -normal, e0 + normal, e0 - normal])
         row_pts = np.vstack([start + turns, row_pts[2:]])

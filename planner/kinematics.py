@@ -456,6 +456,13 @@ class LineFormation:
         return self.path[-1] + (behind * self._spacing_c)[:, None] * self._directions[-1]
 
     @property
+    def landing_slots(self) -> np.ndarray:
+        """(N, 2): where each UAV lands at the end of the mission: its arrival slot
+        (`goal_slots`), or for a station formation its start slot (the fleet comes home),
+        whether or not the return is decided yet."""
+        return self._start_slots.copy() if self.stations is not None else self.goal_slots
+
+    @property
     def station_slots(self) -> np.ndarray:
         """(N, 2): the points where the UAVs hold, s_n along the path from A; `goal_slots` for
         an A -> B formation."""
@@ -812,18 +819,7 @@ def smoothing_error_bound(
     if window_s <= 0:
         return 0.0
     if formation.stations is not None:
-        times, weights = _velocity_jumps(formation, profile)
-        # Instants without a jump (collapsed thresholds, a UAV holding through a speed step)
-        # weigh nothing: each alone far away, so that they widen no neighbourhood.
-        far = float(times.max()) + 2 * window_s + 1.0
-        spread = far + np.arange(times.shape[1]) * (window_s + 1.0)
-        times = np.where(weights > 0, times, spread)
-        order = np.argsort(times, axis=1, kind="stable")
-        return _max_bump_sum(
-            np.take_along_axis(times, order, axis=1),
-            np.take_along_axis(weights, order, axis=1),
-            window_s,
-        )
+        return _worst_bump(*_velocity_jumps(formation, profile), window_s)
     thresholds, jumps = formation._kinks()
     crossing = profile.time_at_distance(thresholds)  # (N, K+2)
     finite = np.isfinite(crossing)
@@ -840,9 +836,16 @@ def smoothing_error_bound(
         axis=1,
     )
     weights = np.concatenate([bend_weights, step_weights], axis=1)
-    # Unreached kinks weigh nothing; park them far away so they never share a window.
-    far = float(times.max()) + 4 * window_s + 1.0
-    times = np.where(weights > 0, times, far)
+    return _worst_bump(times, weights, window_s)
+
+
+def _worst_bump(times: np.ndarray, weights: np.ndarray, window_s: float) -> float:
+    """`_max_bump_sum` of kinks at `times` (N, G) weighing `weights`, in any order. Kinks that
+    weigh nothing (unreached, collapsed thresholds, a UAV holding through a speed step) are
+    parked far away, each alone, so that they share no window and widen no neighbourhood."""
+    far = float(times.max()) + 2 * window_s + 1.0
+    spread = far + np.arange(times.shape[1]) * (window_s + 1.0)
+    times = np.where(weights > 0, times, spread)
     order = np.argsort(times, axis=1, kind="stable")
     return _max_bump_sum(
         np.take_along_axis(times, order, axis=1),

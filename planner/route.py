@@ -160,8 +160,14 @@ def first_leg(problem: RouteProblem, fleet_size: int) -> PathProblem:
     rows are the route's: eqs. 14-15 are checked on them before planning)."""
     order = visit_order(problem.start, problem.points, problem.order)
     first = problem.points[order[0]]
-    heading = _direction_deg(first - problem.start) + problem.start_angle_deg
-    return _leg_problem(problem, problem.start, first, heading, None, fleet_size)
+    return _leg_problem(problem, problem.start, first, _heading_a(problem, order), None, fleet_size)
+
+
+def _heading_a(problem: RouteProblem, shortest: np.ndarray) -> float:
+    """e_0's absolute direction (degrees): theta_A from A -> the first point of `shortest`,
+    the shortest visiting order (or the given one)."""
+    reference = problem.points[shortest[0]]
+    return _direction_deg(reference - problem.start) + problem.start_angle_deg
 
 
 def _direction_deg(vector: np.ndarray) -> float:
@@ -180,8 +186,7 @@ def plan_route(
     by their prefix planned once; the refusal is then the shortest order's. theta_A stays
     relative to A -> the first point of the shortest order."""
     orders = visit_orders(problem.start, problem.points, problem.order, RETRY_ORDERS)
-    reference = problem.points[orders[0][0]]
-    heading_a = _direction_deg(reference - problem.start) + problem.start_angle_deg
+    heading_a = _heading_a(problem, orders[0])
     legs: dict[tuple, tuple[PathPlan, list]] = {}
     first = None
     for tried, order in enumerate(orders, start=1):
@@ -250,11 +255,11 @@ def _plan_in_order(
         need = layout.fleet_size
         final_rows = _grown(first, need, points[-1])
         whole = _leg_problem(problem, problem.start, points[-1], heading_a, None, need)
-        if need <= size or check_path(path, whole, final_rows).ok:
-            violations = check_path(path, whole, final_rows)
-            if not violations.ok:  # cannot happen: each leg kept the route valid
-                reason = f"the route breaks definition 4: {violations.describe()}"
-                return _refused(problem, order, reason, None, legs, fleet_round)
+        violations = check_path(path, whole, final_rows)
+        if not violations.ok and need <= size:  # cannot happen: each leg kept the route valid
+            reason = f"the route breaks definition 4: {violations.describe()}"
+            return _refused(problem, order, reason, None, legs, fleet_round)
+        if violations.ok:  # (with rows grown for `need` UAVs too, when it needs more)
             return RoutePlan(
                 valid=True,
                 reason=None,

@@ -55,13 +55,25 @@ def visit_order(start: np.ndarray, points: np.ndarray, order: str = "tsp") -> np
         return np.arange(m)
     if order != "tsp":
         raise ValueError(f"order must be 'tsp' or 'given', not {order!r}")
-    nodes = np.vstack([start[None], points])  # node 0 is A, node i + 1 is points[i]
-    dist = np.linalg.norm(nodes[:, None] - nodes[None], axis=2)
+    dist = _distances(start, points)
     if m <= EXACT_POINTS:
-        perms = np.array(list(itertools.permutations(range(1, m + 1))))
-        cost = dist[0, perms[:, 0]] + dist[perms[:, :-1], perms[:, 1:]].sum(axis=1)
-        return perms[np.argmin(cost)] - 1
+        return _shortest_orders(dist, 1)[0]
     return _two_opt(dist, _annealed(dist, _nearest_neighbour(dist))) - 1
+
+
+def _distances(start: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Distance matrix of node 0 = A and node i + 1 = points[i]."""
+    nodes = np.vstack([start[None], points])
+    return np.linalg.norm(nodes[:, None] - nodes[None], axis=2)
+
+
+def _shortest_orders(dist: np.ndarray, count: int) -> np.ndarray:
+    """The `count` shortest open routes from node 0 through every other node, every
+    permutation scored at once (vectorised), shortest first, ties in permutation order; as
+    indices into the points (node - 1)."""
+    perms = np.array(list(itertools.permutations(range(1, len(dist)))))
+    cost = dist[0, perms[:, 0]] + dist[perms[:, :-1], perms[:, 1:]].sum(axis=1)
+    return perms[np.argsort(cost, kind="stable")[:count]] - 1
 
 
 def visit_orders(
@@ -69,17 +81,12 @@ def visit_orders(
 ) -> list[np.ndarray]:
     """`visit_order` first, then (tsp, m <= EXACT_POINTS) the next shortest open routes, at
     most `count` in all, shortest first (ties in permutation order)."""
-    best = visit_order(start, points, order)
-    m = len(best)
-    if order != "tsp" or m <= 1 or m > EXACT_POINTS or count <= 1:
-        return [best]
     start = np.asarray(start, float)
-    nodes = np.vstack([start[None], np.asarray(points, float).reshape(m, -1)])
-    dist = np.linalg.norm(nodes[:, None] - nodes[None], axis=2)
-    perms = np.array(list(itertools.permutations(range(1, m + 1))))
-    cost = dist[0, perms[:, 0]] + dist[perms[:, :-1], perms[:, 1:]].sum(axis=1)
-    ranked = perms[np.argsort(cost, kind="stable")[:count]] - 1
-    return [best] + [p for p in ranked if not np.array_equal(p, best)][: count - 1]
+    points = np.asarray(points, float).reshape(-1, start.size)
+    m = len(points)
+    if order != "tsp" or m <= 1 or m > EXACT_POINTS or count <= 1:
+        return [visit_order(start, points, order)]
+    return list(_shortest_orders(_distances(start, points), count))
 
 
 def _nearest_neighbour(dist: np.ndarray) -> np.ndarray:

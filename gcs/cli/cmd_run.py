@@ -287,10 +287,7 @@ def run_command(args: argparse.Namespace) -> int:
         operator = OperatorSocket(socket_path_for(log_path))
         stack.callback(operator.close)
         timing = DriverTiming(speedup=args.speedup)
-        # where each UAV lands: its arrival slot, or its start slot after a stations mission
-        landing_slots = (
-            formation.goal_slots if formation.stations is None else formation.start_slots
-        )
+        landing_slots = formation.landing_slots
         drivers = []
         for index, url in enumerate(urls):
             uav = index + 1

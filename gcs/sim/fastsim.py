@@ -245,10 +245,7 @@ class _LockstepMission:
             mavlink.MAVLink(None, srcSystem=uav, srcComponent=1) for uav in range(1, size + 1)
         ]
         self.links = [MemoryLink(f"memory:{uav}", uav) for uav in range(1, size + 1)]
-        # where each UAV lands: its arrival slot, or its start slot after a stations mission
-        landing_slots = (
-            formation.goal_slots if formation.stations is None else formation.start_slots
-        )
+        landing_slots = formation.landing_slots
         drivers = [
             SimDriver(
                 UavSpec(

@@ -88,6 +88,23 @@ def test_a_stall_pauses_the_mission_where_the_uavs_stand(plan):
     assert run.run_json["max_tracking_error_m"] < plan.mission.safety_margin
 
 
+def test_a_stall_that_ends_in_the_tick_waits_for_the_backlog(plan):
+    """The ground station stopped after reading its links and before its tick (the window
+    where a SIGSTOP or a starved CPU hits a busy loop): it wakes up in the tick with the
+    stall's telemetry unread. It must not fly on from a clock that ran on: it stands still,
+    reads the backlog, and resumes where the UAVs stand, as when it wakes up reading."""
+    reading = fly(plan, gcs_stalls=((13.0, 16.0),))
+    ticking = fly(plan, gcs_stalls=((13.0, 16.0),), gcs_stalls_before_tick=True)
+    (stall,) = ticking.stalls
+    (same,) = reading.stalls
+    assert stall.since == same.since
+    assert abs(stall.paused_at - same.paused_at) <= 0.1
+    assert "stall" in kinds(ticking)
+    assert (np.diff(ticking.times) >= 0).all()
+    assert ticking.run_json["completed"] is True
+    assert ticking.run_json["max_tracking_error_m"] < plan.mission.safety_margin
+
+
 def test_a_stall_before_anyone_follows_holds_the_whole_stall_back(plan):
     """No UAV was following the formation: none of the stalled time was flown (nor were the
     take-offs it should have started), so all of it is held back."""

@@ -402,6 +402,7 @@ class GroundStation:
         self.ticks = 0
         self.radio_report: dict | None = None  # the radio medium's last report
         self._last_awake: float | None = None  # the last tick (or the end of a stall)
+        self._pending_stall: float | None = None  # a stall found by `tick`, resumed by `receive`
         self.stalls: list[Stall] = []
         self.tracking_now = np.full(size, np.nan)
         self.mission_time = None
@@ -596,10 +597,18 @@ class GroundStation:
         was stopped or starved of CPU for a setpoint timeout of mission time): the mission clock
         stands still at the last instant the loop ran while the backlog is read, then resumes
         where the formation stands (`_resume_after_stall`)."""
-        stalled_since = self._stalled_since(now)
+        stalled_since = self._pending_stall
+        if stalled_since is None:
+            stalled_since = self._stalled_since(now)
         if stalled_since is not None:
             self.clock.freeze(stalled_since)
+        latest = now
         for index, messages, received in batches:
+            latest = max(latest, received)
+            if stalled_since is None:  # the process stopped while it was reading
+                stalled_since = self._stalled_since(received)
+                if stalled_since is not None:
+                    self.clock.freeze(stalled_since)
             driver = self.drivers[index]
             for msg in messages:
                 driver.on_message(msg, received)
@@ -611,7 +620,8 @@ class GroundStation:
                 ):
                     self._on_position(index, driver, kind == "SIM_STATE", received)
         if stalled_since is not None:
-            self._resume_after_stall(stalled_since, now)
+            self._pending_stall = None
+            self._resume_after_stall(stalled_since, latest)
 
     def fleet_reports(self, now: float, problems: Iterable, radio_reports: Iterable[dict]) -> None:
         """What the fleet's processes reported: problems (`FleetProblem`: a vehicle process
@@ -676,6 +686,15 @@ class GroundStation:
     def tick(self, now: float) -> None:
         """One tick of the flight (the mission's setpoint rate): requests, take-offs and
         landings, setpoints, drivers, acks, monitors, the link policy."""
+        stalled_since = self._stalled_since(now)
+        if stalled_since is not None or self._pending_stall is not None:
+            # The process stopped after it last read its links: the telemetry of the stall
+            # is still queued. Stand still and let the next `receive` read it and resume
+            # where the formation stands; flying on now would chase a reference that ran on.
+            if self._pending_stall is None:
+                self._pending_stall = stalled_since
+                self.clock.freeze(stalled_since)
+            return
         self.ticks += 1
         self._last_awake = now
         t = self.clock.mission_time(now)

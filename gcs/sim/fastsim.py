@@ -69,6 +69,9 @@ class Faults:
     #: (from, to): the ground station does not run (a stopped or starved process); what the
     #: vehicles send meanwhile waits in its socket buffer, as over UDP
     gcs_stalls: tuple[tuple[float, float], ...] = ()
+    #: the stalls stop the ground station after it read its links and before its tick: it
+    #: wakes up in the tick, the backlog still unread (else it wakes up reading it)
+    gcs_stalls_before_tick: bool = False
     #: (UAV id, from, to): every packet to and from that UAV is lost (out of range, jammed)
     link_cuts: tuple[tuple[int, float, float], ...] = ()
     #: (when, speed, effective time or None): `gcs speed` requests of the operator
@@ -323,13 +326,18 @@ class _LockstepMission:
         operator = sorted(faults.operator_requests)
         returns = sorted(faults.operator_returns, key=lambda request: request[0])
         interrupts = sorted(faults.interrupts)
+        was_stalled = False
         while True:
             sim_s = fleet.sim_s
             self.medium.observe_all(fleet.true_xy(), sim_s)
             self._deliver(sim_s)
             vehicle_t = sim_s - self.sim_zero
-            if not (connected and stalls and faults.stalled(vehicle_t)):
-                station.receive(sim_s, self._batches(sim_s))
+            stalled = connected and stalls and faults.stalled(vehicle_t)
+            woke_in_tick = was_stalled and not stalled and faults.gcs_stalls_before_tick
+            was_stalled = stalled
+            if not stalled:
+                if not woke_in_tick:
+                    station.receive(sim_s, self._batches(sim_s))
                 while operator and vehicle_t >= operator[0][0]:
                     _, speed, at = operator.pop(0)
                     self.operator_answers.append(station.operator_request(speed, at, None, sim_s))

@@ -2,8 +2,9 @@
 
 Everything CONTRACTS.md lists as refused is refused here with `InputError` (file, 0-based key
 path, what is expected, on one line), except the checks that need the planned path's fleet
-size (fixed size below the minimum of eq. 28, leader outside 1..N, connection count, parking
-rows vs obstacles and each other, eqs. 14-15): `gcs.planning` makes those, naming the key too.
+size (fixed size below the minimum of eq. 28, leader outside 1..N, connection count, length
+of a `sim.battery_mah` list, parking rows vs obstacles and each other, eqs. 14-15):
+`gcs.planning` makes those, naming the key too.
 
 Types: numbers must be YAML numbers (a boolean is not a number, a string is never converted;
 `1e3` is read as a number, as YAML 1.2 does); integers must be integers. Unknown keys and
@@ -29,7 +30,8 @@ Defaults (every key not listed as required is optional):
   wind_direction_deg: 0, wind_gust_mps: 0.5, wind_time_s: 5, position_m: 0.1}` (mean wind,
   direction it blows towards (counter-clockwise from east), standard deviation and
   correlation time of the gusts, standard deviation of the navigation error on the reported
-  position).
+  position). `sim.battery_mah`: unset (the simulated airframe's 8000 mAh); a number > 0 for
+  every UAV, or a list with one per UAV.
 * `radio`: `{enabled: true, hop_latency_ms: 2, jitter_ms: 1, loss: 0}`.
 * `signing.key_file`: unset (the signing layer picks its default); paths are relative to the
   mission file.
@@ -42,6 +44,9 @@ Defaults (every key not listed as required is optional):
   (WGS84 degrees, through `origin` at `origin.alt`, within `MAX_FOOTPRINT_DISTANCE_M`).
   Each point keeps safety_margin from every obstacle, 2 x safety_margin from every other
   point and 2 sqrt 2 x safety_margin from A (the parking row).
+  `stations.relieve_below_pct` (a number in (0, 100)): unset, no UAV is relieved for its
+  battery; set, a UAV on station whose SYS_STATUS battery_remaining falls below it is relieved
+  (it flies home alone, the others close the gap).
 * `return.at` (only with `stations`): unset, the fleet flies home on the operator's command.
 
 Obstacles: `rectangle` (center, size, angle_deg) and `polygon` are solid polygons, `segment` a
@@ -201,11 +206,26 @@ class SimNoise:
 
 @dataclass(frozen=True)
 class Sim:
-    """Simulated backend: setpoint rate, random seed, noise."""
+    """Simulated backend: setpoint rate, random seed, noise, battery capacity (mAh: one for
+    every UAV, one per UAV, or None for the simulated airframe's)."""
 
     setpoint_rate_hz: float = 10.0
     seed: int = 1
     noise: SimNoise = field(default_factory=SimNoise)
+    battery_mah: float | tuple[float, ...] | None = None
+
+    def battery_capacities(self, count: int) -> tuple[float, ...] | None:
+        """`battery_mah` for `count` UAVs, one number each (None: the airframe's);
+        ValueError if it is a list of another length."""
+        if self.battery_mah is None:
+            return None
+        if isinstance(self.battery_mah, tuple):
+            if len(self.battery_mah) != count:
+                raise ValueError(
+                    f"sim.battery_mah has {len(self.battery_mah)} numbers for {count} UAVs"
+                )
+            return self.battery_mah
+        return (self.battery_mah,) * count
 
 
 @dataclass(frozen=True)
@@ -260,6 +280,9 @@ class Mission:
     station_order: str = "tsp"
     #: `return.at`: mission time (s) at which the fleet flies home; None = on command.
     return_at: float | None = None
+    #: `stations.relieve_below_pct`: a UAV on station whose battery (%) is below it is
+    #: relieved; None = never for its battery.
+    relieve_below_pct: float | None = None
 
     @property
     def base_station_points(self) -> np.ndarray:
@@ -542,8 +565,9 @@ class _Parser:
         signing = self.signing(root.get("signing", {}))
         stations: tuple[Station, ...] = ()
         order = STATION_ORDERS[0]
+        relieve_below_pct = None
         if "stations" in root:
-            stations, order = self.stations(root["stations"], origin)
+            stations, order, relieve_below_pct = self.stations(root["stations"], origin)
         return_at = None
         if "return" in root:
             if "stations" not in root:
@@ -586,6 +610,7 @@ class _Parser:
             stations=stations,
             station_order=order,
             return_at=return_at,
+            relieve_below_pct=relieve_below_pct,
         )
 
     def name(self, value: Any) -> str:
@@ -621,10 +646,22 @@ class _Parser:
             self.number(m["y"], join_key(path, "y"), unit="m"),
         )
 
-    def stations(self, value: Any, origin: Origin) -> tuple[tuple[Station, ...], str]:
-        """`stations: {order, points}` -> the points (local frame) and the order."""
-        m = self.mapping(value, "stations", ("order", "points"), ("points",))
+    def stations(self, value: Any, origin: Origin) -> tuple[tuple[Station, ...], str, float | None]:
+        """`stations: {order, points, relieve_below_pct}` -> the points (local frame), the
+        order and the battery threshold (None: unset)."""
+        m = self.mapping(value, "stations", ("order", "points", "relieve_below_pct"), ("points",))
         order = self.choice(m.get("order", STATION_ORDERS[0]), "stations.order", STATION_ORDERS)
+        relieve_below_pct = None
+        if "relieve_below_pct" in m:
+            relieve_below_pct = self.number(
+                m["relieve_below_pct"],
+                "stations.relieve_below_pct",
+                low=0.0,
+                high=100.0,
+                low_open=True,
+                high_open=True,
+                unit="% battery remaining",
+            )
         what = "points {name, x, y, dwell_s} or {name, lat, lon, dwell_s}"
         items = self.sequence(m["points"], "stations.points", what)
         if not items:
@@ -644,7 +681,7 @@ class _Parser:
                 )
             named[station.name] = i
             out.append(station)
-        return tuple(out), order
+        return tuple(out), order, relieve_below_pct
 
     def station(self, value: Any, path: str, index: int, origin: Origin) -> Station:
         """One `stations.points[i]`: exactly one of x/y or lat/lon, a name, dwell_s."""
@@ -841,7 +878,7 @@ class _Parser:
         return tuple(out)
 
     def sim(self, value: Any) -> Sim:
-        m = self.mapping(value, "sim", ("setpoint_rate_hz", "seed", "noise"))
+        m = self.mapping(value, "sim", ("setpoint_rate_hz", "seed", "noise", "battery_mah"))
         d = Sim()
         rate = self.positive(
             m.get("setpoint_rate_hz", d.setpoint_rate_hz), "sim.setpoint_rate_hz", "Hz"
@@ -867,7 +904,25 @@ class _Parser:
                 n.get("position_m", dn.position_m), "sim.noise.position_m", "m"
             ),
         )
-        return Sim(setpoint_rate_hz=rate, seed=seed, noise=noise)
+        battery = self.battery_mah(m["battery_mah"]) if "battery_mah" in m else None
+        return Sim(setpoint_rate_hz=rate, seed=seed, noise=noise, battery_mah=battery)
+
+    def battery_mah(self, value: Any) -> float | tuple[float, ...]:
+        """`sim.battery_mah`: a number > 0, or a non-empty list of them (one per UAV)."""
+        if isinstance(value, list):
+            if not value:
+                raise self.fail(
+                    "sim.battery_mah", "a number > 0 (mAh) or one per UAV, got an empty list"
+                )
+            return tuple(
+                self.positive(v, join_key("sim.battery_mah", i), "mAh") for i, v in enumerate(value)
+            )
+        if not _is_number(value):
+            raise self.fail(
+                "sim.battery_mah",
+                f"a number > 0 (mAh) or a list with one per UAV, got {_describe(value)}",
+            )
+        return self.positive(value, "sim.battery_mah", "mAh")
 
     def radio(self, value: Any) -> Radio:
         m = self.mapping(value, "radio", ("enabled", "hop_latency_ms", "jitter_ms", "loss"))

@@ -108,18 +108,36 @@ class SafetyMonitor:
             )
         return events
 
-    def positions(self, t: float, xy: np.ndarray) -> list[MonitorEvent]:
-        """Distances and connectivity of the fleet at one instant; `xy` (N, 2), NaN = unknown."""
+    def positions(
+        self,
+        t: float,
+        xy: np.ndarray,
+        heights: np.ndarray | None = None,
+        excluded: np.ndarray | None = None,
+    ) -> list[MonitorEvent]:
+        """Distances and connectivity of the fleet at one instant; `xy` (N, 2), NaN = unknown.
+
+        `heights` (N,): some UAV flies in another layer (a relief): UAV-UAV distances and
+        links are 3-D. `excluded` (N,) bool: UAVs out of the fleet (relieved and landed),
+        neither unknown nor counted."""
+        ids = np.arange(1, len(xy) + 1)
+        if excluded is not None and excluded.any():
+            keep = ~np.asarray(excluded, dtype=bool)
+            xy, ids = xy[keep], ids[keep]
+            heights = None if heights is None else heights[keep]
         known = np.isfinite(xy).all(axis=1)
         known_count = np.count_nonzero(known)
         if not known_count:
             return []
         everyone = known_count == len(known)
+        if heights is not None:
+            heights = np.where(np.isfinite(heights), heights, 0.0)[known]
         sample = check_positions(
             (xy if everyone else xy[known])[None],
             self.obstacles,
             self.base_stations,
             self.radio_range,
+            None if heights is None else heights[None],
         )
         stats = self.stats
         pair = float(sample.min_uav_uav_m[0])
@@ -135,7 +153,8 @@ class SafetyMonitor:
         if math.isfinite(pair):
 
             def who() -> str:
-                return self._closest_pair(xy[known], np.flatnonzero(known) + 1)
+                where = xy[known] if heights is None else np.column_stack([xy[known], heights])
+                return self._closest_pair(where, ids[known])
 
             events += self._condition(
                 ("uav_collision",),
@@ -199,7 +218,7 @@ class SafetyMonitor:
     @staticmethod
     def _closest_pair(xy: np.ndarray, ids: np.ndarray) -> str:
         gap = xy[:, None, :] - xy[None, :, :]
-        distance = np.hypot(gap[..., 0], gap[..., 1])
+        distance = np.linalg.norm(gap, axis=2)
         np.fill_diagonal(distance, np.inf)
         i, j = np.unravel_index(np.argmin(distance), distance.shape)
         return f"{ids[min(i, j)]} and {ids[max(i, j)]}"

@@ -2,9 +2,9 @@
 
 The glue between the mission file and the pure planner. It also makes the refusals that need
 the plan (CONTRACTS.md), each naming its key: a fixed `fleet.size` below the minimum of eq. 28,
-a `leader` outside 1..N, a number of `fleet.connections` different from N, parking rows too
-close to an obstacle or to each other (eqs. 14-15), and a `speed.max` above the highest
-formation speed the path's bends allow (DESIGN 3.5) unless capping is asked for.
+a `leader` outside 1..N, a number of `fleet.connections` or of `sim.battery_mah` different from
+N, parking rows too close to an obstacle or to each other (eqs. 14-15), and a `speed.max` above
+the highest formation speed the path's bends allow (DESIGN 3.5) unless capping is asked for.
 
 Safe speed (DESIGN 3.5): the virtual targets turn corners instantly; a vehicle with
 acceleration limit `vehicle.max_acceleration` following a smoothed reference deviates at a bend
@@ -43,6 +43,7 @@ from planner.kinematics import (
     smoothing_error_bound,
 )
 from planner.numbers import fmt_against, plural
+from planner.relief import ReliefRefused, relief_layout
 from planner.route import RoutePlan, RouteProblem, first_leg, plan_route
 from planner.search import SearchProgress, plan_path
 from planner.types import PathPlan, PathProblem
@@ -421,7 +422,29 @@ def stations_json(plan: MissionPlan) -> dict[str, Any]:
         "on_station_s": _number(plan.duration_s),
         "return_at_s": mission.return_at,
         "failed_point": route.failed_point,
+        "relievable": _relievable(plan),
+        "relieve_below_pct": mission.relieve_below_pct,
     }
+
+
+def _relievable(plan: MissionPlan) -> list[int]:
+    """The UAVs whose gap could close up without them (`planner.relief.relief_layout`): the
+    ones `gcs relieve` may send home (the manoeuvre's own check may still refuse one)."""
+    layout, route = plan.route.layout, plan.route
+    if layout is None or not route.valid:
+        return []
+    mission = plan.mission
+    out = []
+    for uav in range(1, layout.fleet_size + 1):
+        try:
+            relief_layout(
+                layout.stations, route.point_distance, uav, mission.safety_margin,
+                mission.radio_range,
+            )  # fmt: skip
+        except ReliefRefused:
+            continue
+        out.append(uav)
+    return out
 
 
 def plan_within_limits(
@@ -475,6 +498,14 @@ def _check_fleet(mission: Mission, size: int, conns: tuple[str, ...], conn_key: 
                 f"speed.changes[{i}].leader",
                 f"a UAV number in 1..{size} (the fleet size), got {change.leader}",
             )
+    battery = mission.sim.battery_mah
+    if isinstance(battery, tuple) and len(battery) != size:
+        raise InputError(
+            mission.source,
+            "sim.battery_mah",
+            f"a number > 0 (mAh) for every UAV, or a list with one per UAV ({size}), "
+            f"got {plural(len(battery), 'number')}",
+        )
     needs = mission.fleet.backend != "sim" or len(conns) > 0
     if needs and len(conns) != size:
         raise InputError(

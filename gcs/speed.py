@@ -18,8 +18,10 @@ least `min_lead_s`.
 JSON line in, one JSON line out. A speed change (`gcs speed`): `{"speed": 5, "at": 120}` (`at`
 optional; `"command": "speed"` may be added) -> `{"ok": true, "seq": 3, "effective_s": 123.4,
 "speed": 5}`; a stations mission's return home (`gcs return`): `{"command": "return", "at":
-300}` (`at` optional) -> `{"ok": true, "effective_s": 300.0, "distance": 812.5}`; a refusal
-`{"ok": false, "reason": "..."}`. `ask_running_mission` is the client side of both commands.
+300}` (`at` optional) -> `{"ok": true, "effective_s": 300.0, "distance": 812.5}`; the relief
+of one UAV of a stations mission (`gcs relieve N`): `{"command": "relieve", "uav": 2}` ->
+`{"ok": true, "uav": 2, "effective_s": 123.4, "landing_xy": [x, y]}`; a refusal
+`{"ok": false, "reason": "..."}`. `ask_running_mission` is the client side of these commands.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ log = logging.getLogger(__name__)
 #: Longest path a Unix socket address may have (Linux sun_path is 108 bytes with the NUL).
 UNIX_PATH_MAX = 100
 #: What the operator socket may be asked (the request's `command`, "speed" when absent).
-OPERATOR_COMMANDS = ("speed", "return")
+OPERATOR_COMMANDS = ("speed", "return", "relieve")
 
 
 @dataclass(frozen=True)
@@ -190,13 +192,15 @@ def _short_address(path: Path):
 @dataclass
 class OperatorRequest:
     """A request read from the operator socket, answered with `reply`: `command` is one of
-    `OPERATOR_COMMANDS` ("speed": `speed` is set; "return": it is None)."""
+    `OPERATOR_COMMANDS` ("speed": `speed` is set; "return": it is None; "relieve": `uav` is
+    set, `speed` and `at` are None)."""
 
     speed: float | None
     at: float | None
     error: str | None
     connection: socket.socket
     command: str = "speed"
+    uav: int | None = None
 
     def reply(self, answer: dict) -> None:
         try:
@@ -208,8 +212,9 @@ class OperatorRequest:
 
 
 class OperatorSocket:
-    """The running mission's listening socket for `gcs speed`. Never blocks: the scheduler
-    calls `poll()` every tick; it accepts clients and collects their complete lines."""
+    """The running mission's listening socket for `gcs speed`, `gcs return` and `gcs relieve`.
+    Never blocks: the scheduler calls `poll()` every tick; it accepts clients and collects
+    their complete lines."""
 
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
@@ -268,6 +273,11 @@ def _parse_request(line: bytes, conn: socket.socket) -> OperatorRequest:
         command = data.get("command", "speed")
         if command not in OPERATOR_COMMANDS:
             raise ValueError(f"command must be one of {', '.join(OPERATOR_COMMANDS)}")
+        if command == "relieve":
+            uav = data.get("uav")
+            if isinstance(uav, bool) or not isinstance(uav, int) or uav < 1:
+                raise ValueError("uav must be a positive integer")
+            return OperatorRequest(None, None, None, conn, command, uav)
         at = data.get("at")
         if at is not None and (isinstance(at, bool) or not isinstance(at, int | float)):
             raise ValueError("at must be a number")
@@ -315,9 +325,9 @@ def ask_running_mission(
     log_path: Path | None = None,
     directory: Path = Path("logs"),
 ) -> dict:
-    """Client side of `gcs speed` and `gcs return`: send `request` to the running mission
-    (its socket; the one of the run logging to `log_path`; else the newest socket under
-    `directory`, then the older ones until one answers) and return its answer.
+    """Client side of `gcs speed`, `gcs return` and `gcs relieve`: send `request` to the
+    running mission (its socket; the one of the run logging to `log_path`; else the newest
+    socket under `directory`, then the older ones until one answers) and return its answer.
     Raises `NoMissionAnswered`."""
     if socket_path is not None:
         candidates = [socket_path]

@@ -210,6 +210,17 @@ def stations_json(stations: StationsResult) -> dict[str, Any]:
         ],
         "return_s": _num(stations.return_s),
         "held_connected_fraction": _num(stations.held_connected_fraction),
+        "relieved": [
+            {
+                "uav": r.uav,
+                "source": r.source,
+                "asked_s": r.asked_s,
+                "landing": list(r.landing),
+                "landed_s": _num(r.landed_s),
+                "on_station_s": r.on_station_s,
+            }
+            for r in stations.relieved
+        ],
     }
 
 
@@ -220,6 +231,13 @@ def stations_table(stations: StationsResult) -> Table:
         table.add_column(name, justify="right")
     for point in stations.points:
         table.add_row(point.name, str(point.uav), _fmt(point.on_station_s, "s", 1))
+    for relief in stations.relieved:
+        landed = "not landed" if relief.landed_s is None else f"landed t={relief.landed_s:.1f} s"
+        table.add_row(
+            f"relieved ({relief.source}, {landed})",
+            str(relief.uav),
+            _fmt(relief.on_station_s, "s", 1),
+        )
     return table
 
 

@@ -50,8 +50,14 @@ class GuaranteeSamples:
         }
 
 
-def _chunk_metrics(positions: np.ndarray, base_stations: np.ndarray, radio_range: float):
-    """Smallest UAV-UAV distance (T,) and hop counts (T, N) of a chunk of samples.
+def _chunk_metrics(
+    positions: np.ndarray,
+    base_stations: np.ndarray,
+    radio_range: float,
+    heights: np.ndarray | None = None,
+):
+    """Smallest UAV-UAV distance (T,) and hop counts (T, N) of a chunk of samples; with
+    `heights` (T, N) the UAV-UAV distances are 3-D (the stations are reached horizontally).
 
     Hops: breadth-first search run on all samples at once; the frontier (T, N) grows through
     the UAV-UAV adjacency (T, N, N) until no sample gains a UAV. -1 = no path to a station.
@@ -63,6 +69,8 @@ def _chunk_metrics(positions: np.ndarray, base_stations: np.ndarray, radio_range
     to_base = positions[:, :, None, :] - base_stations[None, None, :, :]
     frontier = np.logical_or.reduce(np.einsum("tnbd,tnbd->tnb", to_base, to_base) <= limit, axis=2)
     hops = np.where(frontier, 1, -1)
+    if heights is not None:
+        positions = np.concatenate([positions, heights[..., None]], axis=2)
     between = positions[:, :, None, :] - positions[:, None, :, :]
     squared = np.einsum("tijd,tijd->tij", between, between)
     adjacency = squared <= limit
@@ -88,11 +96,14 @@ def check_positions(
     obstacles: Obstacles,
     base_stations: np.ndarray,
     radio_range: float,
+    heights: np.ndarray | None = None,
 ) -> GuaranteeSamples:
     """Guarantee metrics of UAV positions (T, N, 2) (horizontal; extra columns are ignored).
 
     `base_stations` (B, 2) are A, B and the mission's extra ones: the ground network joins them,
-    so reaching any of them is enough (eq. 3 with more stations).
+    so reaching any of them is enough (eq. 3 with more stations). `heights` (T, N), when some
+    UAV flies in another layer (a relief, `planner.relief`): UAV-UAV distances and links are
+    then 3-D; obstacles (prisms) and base stations are still reached horizontally.
     """
     positions = np.asarray(positions, dtype=float)
     if positions.ndim == 2:
@@ -100,6 +111,8 @@ def check_positions(
     if positions.ndim != 3 or positions.shape[2] < 2:
         raise ValueError("positions must be (T, N, 2)")
     positions = positions[..., :2]
+    if heights is not None:
+        heights = np.broadcast_to(np.asarray(heights, dtype=float), positions.shape[:2])
     stations = np.asarray(base_stations, dtype=float).reshape(-1, 2)
     if not radio_range > 0:
         raise ValueError("radio_range must be > 0")
@@ -112,13 +125,18 @@ def check_positions(
 
     step = max(1, _CHUNK_CELLS // max(1, count * (count + len(stations))))
     if samples <= step:
-        closest, hops = _chunk_metrics(positions, stations, radio_range)
+        closest, hops = _chunk_metrics(positions, stations, radio_range, heights)
     else:
         closest = np.full(samples, np.inf)
         hops = np.full((samples, count), -1, dtype=int)
         for start in range(0, samples, step):
             chunk = slice(start, start + step)
-            closest[chunk], hops[chunk] = _chunk_metrics(positions[chunk], stations, radio_range)
+            closest[chunk], hops[chunk] = _chunk_metrics(
+                positions[chunk],
+                stations,
+                radio_range,
+                None if heights is None else heights[chunk],
+            )
     connected = (hops >= 0).all(axis=1)
     max_hops = np.where(connected, hops.max(axis=1, initial=0), -1)
     return GuaranteeSamples(

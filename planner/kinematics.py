@@ -533,6 +533,16 @@ class LineFormation:
         profile stops for good is inf, eq. 20: a profile that ends with speed 0 at S_out)."""
         return float(profile.time_at_distance(self.total_distance))
 
+    @property
+    def path_arcs(self) -> np.ndarray:
+        """(K,): arc length of each path point P_k from A (0 at A, len(P) at the end)."""
+        return self._cumulative
+
+    def point_at(self, beyond) -> np.ndarray:
+        """Point at arc length `beyond` from A on the path extended by both rows (negative: on
+        the start row, behind A): shape beyond.shape + (2,)."""
+        return self._point_at(np.asarray(beyond, dtype=float))
+
     def _point_at(self, beyond: np.ndarray) -> np.ndarray:
         """Point at arc length `beyond` from A on the path extended by both rows.
 

@@ -69,6 +69,7 @@ def valid_values(tiny_log: Path, folder: Path) -> dict[str, str]:
         "file": str(MISSION),
         "log": str(tiny_log),
         "speed": "5",
+        "uav": "2",
         "out": str(folder / "out"),
         "to": "udpout:127.0.0.1:9",
         "autopilot": "ardupilot",
@@ -126,7 +127,9 @@ def test_every_gcs_command_refuses_bad_flags_on_one_line(capsys, tiny_log, tmp_p
         if required:
             missing = required[-1]
             rest = [arg for a in required[:-1] for arg in invocation(a, values)]
-            name = missing.option_strings[0] if missing.option_strings else missing.dest
+            # a positional is named by its metavar (`gcs relieve N`), else by its dest
+            name = missing.option_strings[0] if missing.option_strings else missing.metavar
+            name = name or missing.dest
             code, out, err = run_gcs(capsys, [*words, *rest])
             one_line_exit_2(code, out, err.lower(), name.lower())
         for args, flag in bad_flag_cases(parser):

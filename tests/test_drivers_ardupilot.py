@@ -7,6 +7,7 @@ boot (position estimate ~40 s) is compressed by the same speedup the driver is t
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from gcs.drivers.base import Phase
 from gcs.geodesy import Origin
 from tests.fakes.ardupilot import GUIDED, LAND, ArduCopterModel
 from tests.fakes.flight import Flight, SinkDriver, home_of, hover, leg
-from tests.fakes.replay import drive, load
+from tests.fakes.replay import drive, load, reencode
 
 # Every test here starts a process or flies over UDP.
 pytestmark = pytest.mark.slow
@@ -241,3 +242,21 @@ def test_recorded_ardupilot_session_drives_the_state_machine():
         assert "Arm: Need Position Estimate" in texts
         arms = bench.commands(400)
         assert arms and arms[0][0] >= 42.59  # never before the pre-arm bit in GUIDED
+
+
+def test_recorded_ardupilot_battery_is_the_telemetry_s_remaining_charge():
+    """SYS_STATUS battery_remaining of A1 (100 % at boot, 85 % after 110 s of it) is the
+    driver's `battery_remaining_pct`; -1 (unknown) makes it None again."""
+    statuses = [r for r in load("ardupilot-session.jsonl") if r.type == "SYS_STATUS"]
+    with SinkDriver.start("ardupilot", 1, ORIGIN, (0.0, 0.0), 20.0) as bench:
+        telemetry = bench.driver.telemetry
+        assert telemetry.battery_remaining_pct is None  # nothing heard yet
+        seen = []
+        for record in statuses:
+            bench.driver.on_message(reencode(record), record.t)
+            seen.append(telemetry.battery_remaining_pct)
+        assert seen == [float(r.fields["battery_remaining"]) for r in statuses]
+        assert (seen[0], seen[-1]) == (100.0, 85.0)
+        unknown = replace(statuses[-1], fields={**statuses[-1].fields, "battery_remaining": -1})
+        bench.driver.on_message(reencode(unknown), unknown.t)
+        assert telemetry.battery_remaining_pct is None

@@ -24,7 +24,7 @@ from tests.fakes.px4 import (
     POSCTL,
     Px4Model,
 )
-from tests.fakes.replay import drive, load
+from tests.fakes.replay import drive, load, reencode
 
 # Every test here starts a process or flies over UDP.
 pytestmark = pytest.mark.slow
@@ -262,3 +262,18 @@ def test_recorded_px4_session_drives_the_state_machine():
         arms = bench.commands(400)
         assert arms and arms[0][0] >= 9.42  # not while OFFBOARD had no stream (bit at 9.42)
         assert not bench.commands(176)  # OFFBOARD already selected (by the recorder)
+
+
+def test_recorded_px4_battery_is_the_telemetry_s_remaining_charge():
+    """SYS_STATUS battery_remaining of P1 (99 % at boot, down to SIH's floor of 51 % in
+    flight, 99 % again once landed at 75.8) is the driver's `battery_remaining_pct`."""
+    statuses = [r for r in load("px4-session.jsonl.gz") if r.type == "SYS_STATUS"]
+    origin = Origin(47.3977456, 8.545593, 487.643)
+    with SinkDriver.start("px4", 1, origin, (0.0, 0.0), 20.0) as bench:
+        telemetry = bench.driver.telemetry
+        seen = []
+        for record in statuses:
+            bench.driver.on_message(reencode(record), record.t)
+            seen.append(telemetry.battery_remaining_pct)
+        assert seen == [float(r.fields["battery_remaining"]) for r in statuses]
+        assert (seen[0], min(seen), seen[-1]) == (99.0, 51.0, 99.0)

@@ -1,21 +1,29 @@
-"""The sim driver's state machine against real `vehicles sim` processes over loopback UDP."""
+"""The sim driver's state machine against real `vehicles sim` processes over loopback UDP,
+and what `gcs mission run` puts on those processes' command lines."""
 
 from __future__ import annotations
 
 import selectors
 import time
 from collections.abc import Callable
+from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from gcs.cli.cmd_run import sim_setup
 from gcs.drivers import BackendUnavailable, driver_class
 from gcs.drivers.base import DriverTiming, Phase, UavSpec
 from gcs.drivers.sim import SimDriver, SimFleet, SimVehicleSetup
 from gcs.geodesy import Origin
 from gcs.link import Link, mavutil
+from gcs.mission import load_mission
+from gcs.planning import plan_mission
 from gcs.speed import SpeedChange
+from tests.conftest import MISSIONS
 from tests.flying import flight_speedup
+from vehicles.cli import build_parser, config_from_args
 
 mavlink = mavutil.mavlink
 ORIGIN = Origin(45.7640, 4.8357, 170.0)
@@ -67,6 +75,31 @@ def close(fleet, drivers):
     fleet.close()
     for process in fleet.processes:
         assert process.poll() is not None, "a vehicle process was left running"
+
+
+def test_the_vehicle_processes_get_each_uavs_battery_capacity(tmp_path):
+    """`sim.battery_mah` of the mission -> `gcs mission run`'s `SimVehicleSetup` -> each
+    process's `vehicles sim --battery-mah`, as that process reads it."""
+    text = (MISSIONS / "core.yaml").read_text()
+    path = tmp_path / "core.yaml"
+    path.write_text(text.replace("seed: 3}", "seed: 3, battery_mah: [8000, 500, 1000, 250]}"))
+    args = SimpleNamespace(speedup=1.0, vehicles_per_process=3)
+
+    def fleet(mission_path: Path) -> SimFleet:
+        mission = load_mission(mission_path)
+        formation = plan_mission(mission).formation
+        return SimFleet(sim_setup(mission, formation, args, {}, path.with_suffix(".mcap")))
+
+    small = fleet(path)
+    assert small.setup.groups() == [[0, 1, 2], [3]]
+    got = []
+    for group in small.setup.groups():
+        command = small.vehicle_command(group, 14560)
+        got += [
+            v.battery_mah for v in config_from_args(build_parser().parse_args(command[3:])).vehicles
+        ]
+    assert got == [8000.0, 500.0, 1000.0, 250.0]
+    assert "--battery-mah" not in fleet(MISSIONS / "core.yaml").vehicle_command([0, 1, 2], 14560)
 
 
 def test_registry_picks_the_family_from_the_backend():

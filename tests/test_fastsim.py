@@ -2,7 +2,8 @@
 
 The small mission completes connected, with the run JSON of CONTRACTS.md (and its `radio`
 object); latency grows with the hop count; every UAV receives every speed change, the leader's
-too; two runs with the same seed are identical; a fleet forced too small is cut off.
+too; two runs with the same seed are identical; a fleet forced too small is cut off; a UAV
+given a small battery (`sim.battery_mah`) reports less of it left.
 """
 
 from __future__ import annotations
@@ -102,3 +103,21 @@ def test_a_fleet_forced_too_small_is_cut_off(plan):
     dropped = cut.packets["kind"][np.isnan(cut.packets["delay_s"])]
     assert (dropped == KINDS.index("downlink")).any()  # its setpoints were lost
     assert any(e["kind"] == "link_lost" for e in run["events"])
+
+
+def test_a_uav_with_a_small_battery_reports_less_left_by_the_end(tmp_path):
+    """tests/missions/core.yaml with `sim.battery_mah: [8000, 1000, 8000, 8000]`: the
+    SYS_STATUS battery_remaining each UAV last reported to its driver."""
+    core = Path(__file__).resolve().parent / "missions" / "core.yaml"
+    text = core.read_text().replace(
+        "sim: {setpoint_rate_hz: 10, seed: 3}",
+        "sim: {setpoint_rate_hz: 10, seed: 3, battery_mah: [8000, 1000, 8000, 8000]}",
+    )
+    path = tmp_path / "core.yaml"
+    path.write_text(text)
+    run = fly_fast(plan_mission(load_mission(path)))
+    assert run.run_json["completed"] is True
+    full, small = np.delete(run.battery_remaining_pct, 1), run.battery_remaining_pct[1]
+    assert np.isfinite(run.battery_remaining_pct).all()
+    assert (full < 100).all() and full.max() - full.min() <= 2  # drained alike
+    assert 10 < small < full.min() - 15  # about 8 times their drain

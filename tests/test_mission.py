@@ -60,6 +60,7 @@ def test_minimal_mission_gets_the_documented_defaults(tmp_path):
     assert v.tracking_allowance == pytest.approx(DEFAULT_TRACKING_FRACTION * 5)
     assert mission.error_budget == pytest.approx(5 * (1 - DEFAULT_TRACKING_FRACTION))
     assert mission.sim.setpoint_rate_hz == 10.0 and mission.sim.seed == 1
+    assert mission.sim.battery_mah is None and mission.sim.battery_capacities(4) is None
     assert mission.radio.enabled and mission.radio.loss == 0.0
     assert mission.signing.key_file is None
     assert len(mission.obstacles) == 0 and mission.base_stations == ()
@@ -208,6 +209,52 @@ def test_unreadable_file_is_refused(tmp_path):
 )
 def test_types_are_not_converted(tmp_path, replace, key):
     assert refusal(write(tmp_path, MINIMAL.replace(*replace))).key_path == key
+
+
+def test_sim_battery_mah_for_every_uav_or_one_each(tmp_path):
+    one = load_mission(write(tmp_path, MINIMAL + "sim: {battery_mah: 500}\n")).sim
+    assert one.battery_mah == 500.0 and one.battery_capacities(3) == (500.0, 500.0, 500.0)
+    each = load_mission(write(tmp_path, MINIMAL + "sim: {battery_mah: [8000, 250.5]}\n")).sim
+    assert each.battery_mah == (8000.0, 250.5) and each.battery_capacities(2) == (8000.0, 250.5)
+    with pytest.raises(ValueError, match="2 numbers for 3 UAVs"):
+        each.battery_capacities(3)
+
+
+@pytest.mark.parametrize(
+    ("value", "key", "expected"),
+    [
+        ("0", "sim.battery_mah", "a finite number > 0 (mAh), got 0"),
+        ("-5", "sim.battery_mah", "a finite number > 0 (mAh), got -5"),
+        ("'500'", "sim.battery_mah", "or a list with one per UAV, got '500' (a string)"),
+        ("true", "sim.battery_mah", "or a list with one per UAV, got true (a boolean)"),
+        ("{uav2: 500}", "sim.battery_mah", "or a list with one per UAV, got a mapping"),
+        ("[]", "sim.battery_mah", "or one per UAV, got an empty list"),
+        ("[8000, 0]", "sim.battery_mah[1]", "a finite number > 0 (mAh), got 0"),
+        ("[8000, .inf]", "sim.battery_mah[1]", "a finite number > 0 (mAh), got inf"),
+    ],
+)
+def test_sim_battery_mah_refusals_name_the_key(tmp_path, value, key, expected):
+    path = write(tmp_path, MINIMAL + f"sim: {{battery_mah: {value}}}\n")
+    error = refusal(path)
+    assert error.key_path == key
+    assert str(error).startswith(f"{path}: {key}: expected ") and str(error).endswith(expected)
+
+
+def test_sim_battery_mah_list_needs_one_number_per_planned_uav(tmp_path):
+    """Its length is checked once the fleet size is known (planning, exit 2)."""
+    from gcs.planning import plan_mission
+
+    size = plan_mission(load_mission(write(tmp_path, MINIMAL))).fleet_size
+    assert size != 2
+    path = write(tmp_path, MINIMAL + "sim: {battery_mah: [8000, 500]}\n")
+    with pytest.raises(InputError) as caught:
+        plan_mission(load_mission(path))
+    assert str(caught.value) == (
+        f"{path}: sim.battery_mah: expected a number > 0 (mAh) for every UAV, or a list with "
+        f"one per UAV ({size}), got 2 numbers"
+    )
+    text = MINIMAL + f"sim: {{battery_mah: [{', '.join(['500'] * size)}]}}\n"
+    assert plan_mission(load_mission(write(tmp_path, text))).fleet_size == size
 
 
 def test_eq9_boundary_is_accepted(tmp_path):

@@ -1,5 +1,5 @@
-"""Monitoring stations in the mission file (use case 1): `stations`, `return`, an optional
-`goal`, their refusals (one line naming the key, exit 2 from the CLI) and
+"""Monitoring stations in the mission file (use case 1): `stations` (with
+`relieve_below_pct`), `return`, an optional `goal`, their refusals (one line naming the key, exit 2 from the CLI) and
 `Mission.base_station_points`."""
 
 from __future__ import annotations
@@ -70,6 +70,7 @@ def test_stations_mission_loads_with_its_defaults(tmp_path):
     assert mission.goal is None
     assert mission.station_order == "tsp"
     assert mission.return_at is None
+    assert mission.relieve_below_pct is None  # no UAV relieved for its battery
     assert [s.name for s in mission.stations] == ["north-shelter", "school", "P3"]
     shelter, school, p3 = mission.stations
     assert shelter == Station("north-shelter", 120.0, 340.0, 600.0)
@@ -89,6 +90,18 @@ def test_order_given_and_return_at(tmp_path):
     assert mission.station_order == "given"
     assert mission.return_at == 900.0
     assert [s.name for s in mission.stations] == ["north-shelter", "school", "P3"]
+
+
+def relieve_below(value: str) -> str:
+    """STATIONS with `stations.relieve_below_pct: value`."""
+    return STATIONS.replace("  points:", f"  relieve_below_pct: {value}\n  points:")
+
+
+def test_relieve_below_pct(tmp_path):
+    assert load_mission(write(tmp_path, relieve_below("25"))).relieve_below_pct == 25.0
+    mission = load_mission(write(tmp_path, relieve_below("99.5")))
+    assert mission.relieve_below_pct == 99.5 and isinstance(mission.relieve_below_pct, float)
+    assert len(mission.stations) == 3
 
 
 def test_goal_is_kept_with_stations(tmp_path):
@@ -198,6 +211,18 @@ REFUSED = [
     (STATIONS.replace("name: school", "name: ''"), "stations.points[1].name", ["non-empty"]),
     (STATIONS.replace("name: school", "name: 12"), "stations.points[1].name", ["non-empty"]),
     (STATIONS.replace("dwell_s: 600", "dwell_s: -1"), "stations.points[0].dwell_s", [">= 0"]),
+    (relieve_below("0"), "stations.relieve_below_pct", ["a number in (0, 100)", "got 0"]),
+    (relieve_below("100"), "stations.relieve_below_pct", ["(0, 100)", "got 100"]),
+    (relieve_below("-5"), "stations.relieve_below_pct", ["(0, 100)", "got -5"]),
+    (relieve_below("'20'"), "stations.relieve_below_pct", ["(0, 100)", "a string"]),
+    (relieve_below("true"), "stations.relieve_below_pct", ["(0, 100)", "a boolean"]),
+    (relieve_below(".nan"), "stations.relieve_below_pct", ["(0, 100)"]),
+    (relieve_below("[20, 30]"), "stations.relieve_below_pct", ["(0, 100)"]),
+    (
+        STATIONS.replace("  points:", "  relieve_below: 20\n  points:"),
+        "stations.relieve_below",
+        ["order, points, relieve_below_pct"],
+    ),
 ]
 
 
@@ -237,6 +262,7 @@ def test_the_first_close_pair_is_named(tmp_path):
         (point("{x: 200, y: 205}"), "stations.points[2]"),
         (point("{x: 10, y: 0}"), "stations.points[2]"),
         (STATIONS + "return: {at: 0}\n", "return.at"),
+        (relieve_below("100"), "stations.relieve_below_pct"),
         (HEAD + "goal: {x: 300, y: 0}\nreturn: {at: 900}\n", "return"),
     ],
 )

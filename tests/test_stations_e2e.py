@@ -78,10 +78,13 @@ def test_a_stations_mission_flies_out_holds_and_comes_home(tmp_path: Path):
         assert sorted(change["acks"]) == [str(u) for u in range(1, run["fleet_size"] + 1)]
 
 
-def test_the_operator_brings_the_fleet_home_with_gcs_return(tmp_path: Path):
-    data = yaml.safe_load(MISSION.read_text())
+def _holding_flight(source: Path, tmp_path: Path):
+    """`gcs mission run` of `source` without its dwells (no dwell, no return.at: the fleet
+    holds until asked): (the mission data, its log, the running flight, `ask(*args)` running
+    another `gcs` command against it)."""
+    data = yaml.safe_load(source.read_text())
     for point in data["stations"]["points"]:
-        del point["dwell_s"]  # no dwell, no return.at: the fleet holds until asked
+        del point["dwell_s"]
     mission = tmp_path / "hold.yaml"
     mission.write_text(yaml.safe_dump(data, sort_keys=False))
     log = tmp_path / "hold.mcap"
@@ -96,6 +99,11 @@ def test_the_operator_brings_the_fleet_home_with_gcs_return(tmp_path: Path):
             capture_output=True, text=True, cwd=tmp_path, env=environment(), timeout=30,
         )  # fmt: skip
 
+    return data, log, flight, ask
+
+
+def test_the_operator_brings_the_fleet_home_with_gcs_return(tmp_path: Path):
+    data, log, flight, ask = _holding_flight(MISSION, tmp_path)
     try:
         flight.wait_for("holding until the operator asks", timeout=100)
         speed = ask("speed", "3")
@@ -173,3 +181,49 @@ def test_fake_arducopters_fly_a_stations_mission_with_the_drivers_as_they_are(
         lat, lon, _ = enu_to_global(model.boot_home, model.body.position)
         landed = geodetic_to_enu(lat, lon, mission.origin.alt, mission.origin)
         assert np.hypot(*(landed[:2] - slot)) < 1.5
+
+
+@pytest.mark.timeout(300)
+def test_the_operator_relieves_one_uav_with_gcs_relieve(tmp_path: Path):
+    """tests/missions/stations-relief.yaml (5 UAVs where 3 would do) without dwells: once the
+    fleet holds, a real `gcs relieve 3` sends UAV 3 (holder of `north`) home alone: UAV 4 takes
+    `north`, UAV 3 lands on the last slot; a second relief and the return are refused until it
+    has landed; then `gcs return` brings the four others home onto the first four slots."""
+    data, log, flight, ask = _holding_flight(MISSIONS / "stations-relief.yaml", tmp_path)
+    try:
+        flight.wait_for("holding until the operator asks", timeout=100)
+        relief = ask("relieve", "3", "--json")
+        assert relief.returncode == 0, relief.stderr
+        answer = json.loads(relief.stdout)
+        assert answer["ok"] is True and answer["uav"] == 3
+        assert "UAV 3 relieved at mission time" in relief.stderr
+        second = ask("relieve", "4")
+        assert second.returncode == 1 and "one relief at a time" in second.stderr
+        early = ask("return")
+        assert early.returncode == 1 and "is being relieved" in early.stderr
+        flight.wait_for("UAV 3: landing -> landed", timeout=120)
+        back = ask("return")
+        assert back.returncode == 0, back.stderr
+        code, out, err = flight.finish(timeout=120)
+    finally:
+        flight.kill()
+    assert code == 0, err[-3000:]
+    run = json.loads(out)
+    assert run["completed"] is True
+    _within_guarantees(run, data["safety_margin"])
+    stations = run["stations"]
+    assert [p["uav"] for p in stations["points"]] == [4, 1]
+    (relieved,) = stations["relieved"]
+    assert relieved["uav"] == 3 and relieved["source"] == "operator"
+    topics = read_log(log)
+    slots = np.array(topics["/plan"][0][1]["parking_slots"]["A"])
+    ends = {}
+    for uav in range(1, 6):
+        last = topics[f"/uav{uav}/state"][-1][1]
+        assert last["phase"] == "landed"
+        ends[uav] = np.array(last["true_position"][:2])
+    assert np.hypot(*(ends[3] - slots[4])) < 1.5
+    for rank, uav in enumerate((1, 2, 4, 5)):
+        assert np.hypot(*(ends[uav] - slots[rank])) < 1.5
+    (record,) = [m for _, m in topics["/relief"]]
+    assert record["members"] == [1, 2, 4, 5]

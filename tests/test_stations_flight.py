@@ -8,13 +8,14 @@ A first) and lands on its start slot. The guarantees are checked on the true pos
 every sampled instant (0.1 s): out, closing up, holding and home. While the fleet holds, an
 operator's speed change is refused. An operator's return before everyone is on station ends
 the same way; a second return, a return on an A -> B mission and a return while everyone
-lands are refused. The operator socket's `return` command and
-`gcs return`'s refusals close the file (the round trip over a real mission is
+lands are refused. The operator socket's `return` and `relieve` commands and the refusals of
+`gcs return` and `gcs relieve` close the file (the round trip over a real mission is
 tests/test_stations_e2e.py).
 """
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from pathlib import Path
@@ -22,12 +23,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gcs.flight.live import LiveLoop
 from gcs.flight.records import ReturnRecord
 from gcs.logs.logreader import read_recording
 from gcs.logs.report import flight_metrics, load_flight
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
-from gcs.sim.fastsim import FastOptions, Faults, fly_fast, with_fleet_size
+from gcs.sim.fastsim import FastOptions, Faults, _LockstepMission, fly_fast, with_fleet_size
 from gcs.speed import OperatorSocket, send_operator_command, socket_path_for
 from tests.conftest import MISSIONS
 
@@ -262,6 +264,27 @@ def test_the_operator_socket_reads_return_requests_and_speed_requests_as_before(
     assert parsed.command == "return" and parsed.error == "bad request: at must be a number"
 
 
+def test_the_operator_socket_reads_relieve_requests(tmp_path):
+    path = socket_path_for(tmp_path / "run.mcap")
+    parsed, answer = _ask(path, {"command": "relieve", "uav": 2})
+    assert (parsed.command, parsed.uav, parsed.speed, parsed.at, parsed.error) == (
+        "relieve",
+        2,
+        None,
+        None,
+        None,
+    )
+    assert answer == {"ok": True, "echo": "relieve"}
+    for uav in (True, 2.0, "2", 0, -1, None):
+        request = {"command": "relieve"} if uav is None else {"command": "relieve", "uav": uav}
+        parsed, answer = _ask(path, request)
+        assert (parsed.command, parsed.uav) == ("relieve", None)
+        assert parsed.error == "bad request: uav must be a positive integer"
+        assert answer["ok"] is False
+    parsed, _ = _ask(path, {"command": "return", "uav": 2})
+    assert (parsed.command, parsed.uav, parsed.error) == ("return", None, None)
+
+
 def test_gcs_return_bad_input_and_no_mission(gcs_main, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     code, out, err = gcs_main("return", "--at", "nan")
@@ -276,6 +299,53 @@ def test_gcs_return_bad_input_and_no_mission(gcs_main, tmp_path, monkeypatch):
     assert code == 1 and "no running mission answered" in err
     code, _, err = gcs_main("speed", "3", "--socket", str(tmp_path / "none.sock"))
     assert code == 1 and err.startswith("gcs speed: no running mission answered")
+
+
+def test_gcs_relieve_bad_input_and_no_mission(gcs_main, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for text in ("0", "-1", "2.5", "two", ""):
+        code, out, err = gcs_main("relieve", text)
+        assert code == 2 and out == ""
+        assert err.strip() == f"N: expected a positive integer, got {text!r}"
+    code, out, err = gcs_main("relieve")
+    assert code == 2 and out == "" and "required: N" in err and len(err.splitlines()) == 1
+    code, out, err = gcs_main("relieve", "2", "--json")
+    assert code == 1 and out == ""
+    assert (
+        err.strip()
+        == "gcs relieve: no running mission (no socket under ./logs; use --socket or --log)"
+    )
+    code, _, err = gcs_main("relieve", "2", "--socket", str(tmp_path / "none.sock"))
+    assert code == 1 and err.startswith("gcs relieve: no running mission answered")
+
+
+def test_gcs_relieve_is_refused_by_a_mission_not_flying_yet(gcs_main, plan, tmp_path):
+    """A real ground station behind the live loop's operator socket, before take-off."""
+    path = socket_path_for(tmp_path / "run.mcap")
+    station = _LockstepMission(plan, FastOptions()).station
+    loop = LiveLoop(station, operator=OperatorSocket(path))
+    stop = threading.Event()
+
+    def serve():
+        while not stop.is_set():
+            loop._poll_operator(time.monotonic())
+            time.sleep(0.005)
+
+    server = threading.Thread(target=serve)
+    server.start()
+    try:
+        code, out, err = gcs_main("relieve", "2", "--socket", path)
+        assert (code, out) == (1, "")
+        assert err.strip() == "gcs relieve: refused: the fleet is not flying yet"
+        code, out, err = gcs_main("relieve", "3", "--socket", path, "--json")
+        assert code == 1
+        assert json.loads(out) == {"ok": False, "reason": "the fleet is not flying yet"}
+        answer = send_operator_command(path, {"command": "relieve", "uav": 1.5})
+        assert answer == {"ok": False, "reason": "bad request: uav must be a positive integer"}
+    finally:
+        stop.set()
+        server.join(5.0)
+        loop.operator.close()
 
 
 def test_the_return_record_json():

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from vehicles.autopilot import Autopilot, AutopilotConfig, FailsafeConfig, Guided, Mode, Stamp
+from vehicles.autopilot.parameters import parameters
 from vehicles.dynamics import Disturbances, DynamicsConfig, FleetDynamics
 from vehicles.fleet_speed import LeaderRequest, LeaderSchedule, MissionClock, SpeedBook, SpeedChange
 from vehicles.link import make_codec
@@ -324,6 +325,36 @@ def test_battery_drains_while_flying():
     used = bench.autopilot.battery()
     assert full.remaining_fraction == 1.0 and 0.9 < used.remaining_fraction < 0.99
     assert used.voltage_v < full.voltage_v and used.current_a > 5.0
+
+
+def test_battery_capacity_per_vehicle():
+    """The same energy drawn from 8000 and 1000 mAh: 8 times the share of the small one, in
+    its SYS_STATUS and its BATT_CAPACITY."""
+    dynamics = FleetDynamics(DynamicsConfig(), np.zeros((2, 3)), [(0, 1), (0, 2)], (8000, 1000))
+    autopilots = [
+        Autopilot(
+            sysid=k + 1,
+            index=k,
+            count=2,
+            config=AutopilotConfig(),
+            dynamics=dynamics,
+            origin=DEFAULT_ORIGIN,
+        )
+        for k in range(2)
+    ]
+    dynamics.energy_used_j[:] = 20_000.0
+    big, small = (ap.battery() for ap in autopilots)
+    assert 1 - small.remaining_fraction == pytest.approx(8 * (1 - big.remaining_fraction))
+    stamp = Stamp(0.0, 0.0)
+    snapshot = FleetSnapshot(dynamics, DEFAULT_ORIGIN)
+    build = BUILDERS[mavlink.MAVLINK_MSG_ID_SYS_STATUS]
+    reported = [build(ap.status(stamp), snapshot, stamp).battery_remaining for ap in autopilots]
+    assert reported == [round(100 * b.remaining_fraction) for b in (big, small)]
+    assert reported[1] < reported[0] - 40
+    capacities = [dict((n, v) for n, v, _ in parameters(ap))["BATT_CAPACITY"] for ap in autopilots]
+    assert capacities == [8000, 1000]
+    with pytest.raises(ValueError, match="one battery capacity per vehicle"):
+        FleetDynamics(DynamicsConfig(), np.zeros((2, 3)), [(0, 1), (0, 2)], (8000,))
 
 
 def test_telemetry_schedule_rates_and_overrides():

@@ -1,6 +1,7 @@
 """`vehicles sim` command line: bad input is one line and exit 2, a port in use too, signals
-stop it cleanly, and `--count` hosts several vehicles (own port, own system id, own start)
-that also push to an `--out` address."""
+stop it cleanly, `--battery-mah` sizes every vehicle's battery or each one's, and `--count`
+hosts several vehicles (own port, own system id, own start) that also push to an `--out`
+address."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from vehicles.cli import main
+from vehicles.cli import build_parser, config_from_args, main
 from vehicles.testing import GroundStation, VehicleProcess, free_udp_ports, local_of
 
 
@@ -41,6 +42,13 @@ from vehicles.testing import GroundStation, VehicleProcess, free_udp_ports, loca
         (["sim", "--base-port", "14560", "--gcs-sysid", "1"], "--gcs-sysid"),
         (["sim", "--base-port", "14560", "--wind", "1"], "--wind"),
         (["sim", "--base-port", "14560", "--setpoint-timeout", "0"], "--setpoint-timeout"),
+        (["sim", "--base-port", "14560", "--battery-mah", "0"], "--battery-mah"),
+        (["sim", "--base-port", "14560", "--battery-mah", "500,x"], "--battery-mah"),
+        (["sim", "--base-port", "14560", "--battery-mah", "nan"], "--battery-mah"),
+        (
+            ["sim", "--base-port", "14560", "--count", "2", "--battery-mah", "1,2,3"],
+            "--battery-mah",
+        ),
         (["fly"], "fly"),
     ],
 )
@@ -50,6 +58,16 @@ def test_bad_flags_are_one_line_naming_the_flag_and_exit_2(argv, names, capsys):
     assert captured.out == ""
     lines = captured.err.strip().splitlines()
     assert len(lines) == 1 and names in lines[0] and lines[0].startswith("vehicles sim: error: ")
+
+
+def test_battery_mah_sizes_every_vehicle_or_each_one():
+    def capacities(*flags: str) -> list:
+        args = build_parser().parse_args(["sim", "--base-port", "14560", "--count", "3", *flags])
+        return [spec.battery_mah for spec in config_from_args(args).vehicles]
+
+    assert capacities() == [None, None, None]  # the airframe's
+    assert capacities("--battery-mah", "500") == [500.0, 500.0, 500.0]
+    assert capacities("--battery-mah", "8000,250,1e3") == [8000.0, 250.0, 1000.0]
 
 
 def test_a_bad_positions_file_names_the_file(tmp_path, capsys):

@@ -172,6 +172,20 @@ def _positions_file(path: str) -> list[tuple[float, float, float]]:
     return _position_list(path, data)
 
 
+def _battery_mah(text: str) -> tuple[float, ...]:
+    """`MAH` or `MAH,MAH,...` (one per vehicle, checked against --count later)."""
+    try:
+        values = tuple(float(part) for part in text.split(","))
+    except ValueError:
+        values = ()
+    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise InputError(
+            f"--battery-mah: expected a number > 0 or comma-separated numbers > 0 (mAh, one "
+            f"per vehicle), got {text!r}"
+        )
+    return values
+
+
 def _signing_key(path: str) -> bytes:
     try:
         return read_key_file(path)
@@ -344,6 +358,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add("--no-noise", action="store_true", help="no gusts and no navigation noise")
     add(
+        "--battery-mah",
+        type=_battery_mah,
+        metavar="MAH[,MAH...]",
+        help="battery capacity mAh, for every vehicle or one per vehicle (8000)",
+    )
+    add(
         "--rate-hz",
         type=_positive("--rate-hz"),
         default=100.0,
@@ -398,6 +418,14 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         raise InputError(
             f"--gcs-sysid: must differ from the vehicles' system ids, got {args.gcs_sysid}"
         )
+    batteries: tuple[float | None, ...] = (None,) * count
+    if args.battery_mah is not None:
+        if len(args.battery_mah) not in (1, count):
+            raise InputError(
+                f"--battery-mah: expected 1 or {count} numbers (one per vehicle), "
+                f"got {len(args.battery_mah)}"
+            )
+        batteries = args.battery_mah * (count if len(args.battery_mah) == 1 else 1)
     disturbances = Disturbances(
         wind_mean_mps=args.wind,
         gust_sigma_mps=args.gust,
@@ -439,7 +467,8 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         land_speed_mps=min(0.5, args.max_descent),
     )
     vehicles = tuple(
-        VehicleSpec(sysid, args.base_port + k, positions[k]) for k, sysid in enumerate(sysids)
+        VehicleSpec(sysid, args.base_port + k, positions[k], batteries[k])
+        for k, sysid in enumerate(sysids)
     )
     return SimConfig(
         vehicles=vehicles,

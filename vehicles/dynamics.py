@@ -238,7 +238,8 @@ class FleetDynamics:
 
     Public arrays (one row per vehicle): ``position``, ``velocity``, ``thrust_acceleration``
     (commanded-and-achieved acceleration, gravity excluded), ``wind``, ``navigation_error``,
-    ``yaw`` (rad, NED heading), ``ground_z``, ``grounded``, ``motors_on``, ``energy_used_j``.
+    ``yaw`` (rad, NED heading), ``ground_z``, ``grounded``, ``motors_on``, ``energy_used_j``,
+    ``battery_capacity_mah`` (the airframe's, unless given per vehicle).
     Reference arrays: ``reference_position/velocity/acceleration``, ``reference_time``,
     ``reference_horizon``, ``use_position/velocity/acceleration``, ``speed_limit``,
     ``climb_limit``, ``descent_limit``, ``yaw_target`` (NaN: face the direction of travel).
@@ -249,11 +250,14 @@ class FleetDynamics:
         config: DynamicsConfig,
         start_positions: np.ndarray,
         seed_sequences: Sequence[Sequence[int]],
+        battery_capacity_mah: Sequence[float] | None = None,
     ) -> None:
         start = np.asarray(start_positions, dtype=float).reshape(-1, 3)
         count = start.shape[0]
         if len(seed_sequences) != count:
             raise ValueError("one seed sequence per vehicle is needed")
+        if battery_capacity_mah is not None and len(battery_capacity_mah) != count:
+            raise ValueError("one battery capacity per vehicle is needed")
         self.config = config
         self.count = count
         self.time_s = 0.0
@@ -287,6 +291,11 @@ class FleetDynamics:
         self.grounded = np.ones(count, dtype=bool)
         self.motors_on = np.zeros(count, dtype=bool)
         self.energy_used_j = np.zeros(count)
+        self.battery_capacity_mah = (
+            np.full(count, airframe.battery_capacity_mah)
+            if battery_capacity_mah is None
+            else np.array(battery_capacity_mah, dtype=float)
+        )
         self.power_w = np.zeros(count)
         self.reference_time = np.zeros(count)
         self.reference_horizon = np.zeros(count)

@@ -48,6 +48,8 @@ class LockstepConfig:
     quiet_streams: tuple[int, ...] = QUIET_STREAMS
     #: (message id, interval in simulated s) of streams sent at another rate than by default
     stream_intervals: tuple[tuple[int, float], ...] = ()
+    #: battery capacity of each vehicle, mAh (None: the airframe's)
+    battery_mah: tuple[float, ...] | None = None
 
 
 class LockstepFleet:
@@ -58,7 +60,10 @@ class LockstepFleet:
         starts = np.asarray(config.starts, dtype=float).reshape(-1, 3)
         count = len(starts)
         self.dynamics = FleetDynamics(
-            config.dynamics, starts, [(config.seed, sysid) for sysid in config.sysids]
+            config.dynamics,
+            starts,
+            [(config.seed, sysid) for sysid in config.sysids],
+            config.battery_mah,
         )
         self.autopilots = [
             Autopilot(

@@ -38,11 +38,13 @@ _SLIP_REPORT_INTERVAL_S = 5.0
 
 @dataclass(frozen=True)
 class VehicleSpec:
-    """One vehicle: its system id, UDP port and start position (local ENU metres)."""
+    """One vehicle: its system id, UDP port, start position (local ENU metres) and battery
+    capacity (mAh; None: the airframe's)."""
 
     sysid: int
     port: int
     start_enu: tuple[float, float, float]
+    battery_mah: float | None = None
 
 
 @dataclass(frozen=True)
@@ -95,7 +97,12 @@ class Simulation:
             raise
         starts = np.array([spec.start_enu for spec in config.vehicles], dtype=float).reshape(-1, 3)
         seeds = [(config.seed, spec.sysid) for spec in config.vehicles]
-        self.dynamics = FleetDynamics(config.dynamics, starts, seeds)
+        default_mah = config.dynamics.airframe.battery_capacity_mah
+        capacities = [
+            default_mah if spec.battery_mah is None else spec.battery_mah
+            for spec in config.vehicles
+        ]
+        self.dynamics = FleetDynamics(config.dynamics, starts, seeds, capacities)
         count = len(config.vehicles)
         self.autopilots = [
             Autopilot(

@@ -28,6 +28,7 @@ GROUPS: tuple[str, ...] = (
     "gcs.cli.cmd_mission",
     "gcs.cli.cmd_speed",
     "gcs.cli.cmd_return",
+    "gcs.cli.cmd_relieve",
     "gcs.cli.cmd_log",
     "gcs.cli.cmd_sitl",
     "gcs.cli.cmd_eval",

@@ -363,7 +363,7 @@ def run_command(args: argparse.Namespace) -> int:
 
 def sim_setup(mission, formation, args, leaders, log_path: Path) -> SimVehicleSetup:
     """The simulated fleet of `mission`: homes on the parking slots at A, the mission's
-    vehicle limits, wind and navigation noise, leaders and speedup."""
+    vehicle limits, wind and navigation noise, battery capacities, leaders and speedup."""
     from gcs.drivers.sim import SimVehicleSetup
 
     noise = mission.sim.noise
@@ -382,6 +382,7 @@ def sim_setup(mission, formation, args, leaders, log_path: Path) -> SimVehicleSe
         ),
         gust_mps=noise.wind_gust_mps,
         navigation_noise_m=noise.position_m,
+        battery_mah=mission.sim.battery_capacities(len(formation.start_slots)),
         leaders=leaders,
         log_dir=log_path.parent / (log_path.stem + "-vehicles")
         if getattr(args, "verbose", 0)

@@ -3,8 +3,9 @@
 The running `gcs mission run` listens on a Unix socket next to its log, `<log>.sock` (owner-only
 permissions). Without `--socket` or `--log`, the newest socket under `./logs/` is used.
 Exit statuses (CONTRACTS.md): 0 accepted (prints the sequence number and the effective time),
-1 refused by the mission or no mission running, 2 bad input. `add_mission_arguments` and
-`ask` are shared with `gcs return` (`gcs.cli.cmd_return`).
+1 refused by the mission or no mission running, 2 bad input. `add_mission_arguments`, `ask`,
+`number` and `positive_int` are shared with `gcs return` and `gcs relieve`
+(`gcs.cli.cmd_return`, `gcs.cli.cmd_relieve`).
 """
 
 from __future__ import annotations
@@ -57,6 +58,17 @@ def number(text: str, flag: str, minimum: float | None = None) -> float:
     if not math.isfinite(value) or (minimum is not None and value < minimum):
         bound = f" >= {minimum:g}" if minimum is not None else ""
         raise InputError(None, flag, f"a finite number{bound}, got {text!r}")
+    return value
+
+
+def positive_int(text: str, flag: str) -> int:
+    """A positive integer (e.g. a UAV id) from an argument's text; bad input names `flag`."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise InputError(None, flag, f"a positive integer, got {text!r}")
     return value
 
 

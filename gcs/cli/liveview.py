@@ -145,6 +145,8 @@ class LiveView:
         parts = [header, table, distances, *events]
         if self.interactive:
             back = " | return [@T]" if stations and run.returned is None else ""
+            if stations and run.returned is None and run.on_station:
+                back += " | relieve N"
             parts.append(Text(f"speed m/s [@T]{back} | land > {self._typed}_", style="bold"))
         return Group(*parts)
 

@@ -252,6 +252,7 @@ class Telemetry:
     system_status: int = 0
     landed_state: int = mavlink.MAV_LANDED_STATE_UNDEFINED
     prearm_ok: bool | None = None
+    battery_remaining_pct: float | None = None  # SYS_STATUS battery_remaining; None: unknown
     heartbeat_time: float | None = None
     autopilot: int | None = None
     vehicle_type: int | None = None
@@ -1147,6 +1148,13 @@ class Driver(ABC):
     def _on_sys_status(self, msg, now: float) -> None:
         if msg.onboard_control_sensors_present & PREARM_CHECK_BIT:
             self.telemetry.prearm_ok = bool(msg.onboard_control_sensors_health & PREARM_CHECK_BIT)
+        # battery_remaining, % (-1: unknown). As recorded (shared/sitl): ArduCopter 4.7 SITL
+        # sends 100 at boot, draining in flight (85 after 110 s), and no BATTERY_STATUS; PX4
+        # SIH sends 99-100, draining once armed to a floor of 51 (its simulated battery stops
+        # at 50 %), recharging once landed, with a BATTERY_STATUS of the same value. The
+        # simulated vehicles send their battery model's charge (vehicles/telemetry.py).
+        remaining = msg.battery_remaining
+        self.telemetry.battery_remaining_pct = None if remaining < 0 else float(remaining)
 
     def _on_statustext(self, msg, now: float) -> None:
         entry = self.texts.add(msg, now)

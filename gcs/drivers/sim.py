@@ -116,6 +116,7 @@ class SimVehicleSetup:
     wind_mps: tuple[float, float] = (0.0, 0.0)  # mean wind east, north
     gust_mps: float | None = None
     navigation_noise_m: float | None = None
+    battery_mah: tuple[float, ...] | None = None  # one capacity per UAV (None: the airframe's)
     leaders: dict[int, list[tuple[float, float]]] = field(default_factory=dict)
     extra_args: tuple[str, ...] = ()
     log_dir: Path | None = None  # where each process's stderr goes (None: discarded)
@@ -217,6 +218,8 @@ class SimFleet(Fleet):
             cmd += ["--gust", f"{s.gust_mps:g}"]
         if s.navigation_noise_m is not None:
             cmd += ["--nav-noise", f"{s.navigation_noise_m:g}"]
+        if s.battery_mah is not None:
+            cmd += ["--battery-mah", ",".join(f"{s.battery_mah[k]:g}" for k in group)]
         if len(group) == 1 and group[0] + 1 in s.leaders:
             requests = ",".join(f"{at:g}:{speed:g}" for at, speed in s.leaders[group[0] + 1])
             cmd += ["--leader-requests", requests, "--leader-sysid", str(s.sysid_base + group[0])]

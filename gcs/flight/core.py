@@ -66,12 +66,14 @@ from gcs.flight.clock import MissionClock, VehicleClock, paused
 from gcs.flight.records import (
     MetricsRecord,
     RadioRecord,
+    ReliefRecord,
     ReturnRecord,
     SetpointRecord,
     SpeedRecord,
     SpeedRecordKind,
     UavStateRecord,
 )
+from gcs.flight.roster import Roster
 from gcs.geodesy import enu_to_geodetic
 from gcs.link import mavutil
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
@@ -91,6 +93,7 @@ from planner.kinematics import (
     smoothed_reference,
     smoothing_error_bound,
 )
+from planner.relief import ReliefRefused
 
 log = logging.getLogger(__name__)
 mavlink = mavutil.mavlink
@@ -124,6 +127,10 @@ _HOLDING = (
     "every UAV holds its station: the formation stands still until the return (gcs return); "
     "speed changes apply from then on"
 )
+#: Share of the vehicle's acceleration a relief's moves use (they start and stop at rest).
+RELIEF_ACCELERATION_SHARE = 0.5
+#: Who relieves a UAV (`ReliefRecord.source`), in words.
+_RELIEF_SOURCES = {"operator": "the operator", "battery": "its battery is low"}
 #: Who brings a stations mission's fleet home (`ReturnRecord.source`), in words.
 _RETURN_SOURCES = {
     "schedule": "the mission's return.at",
@@ -203,6 +210,20 @@ class PointHeld:
 
 
 @dataclass(frozen=True)
+class UavRelieved:
+    """A UAV relieved from its station (`gcs relieve`, or its battery): asked at mission time
+    `asked_s` by `source`, landed on the start-row slot `landing` (at `landed_s`; None if it
+    had not landed), after `on_station_s` mission seconds on station."""
+
+    uav: int
+    source: str
+    asked_s: float
+    landing: tuple[float, float]
+    landed_s: float | None
+    on_station_s: float
+
+
+@dataclass(frozen=True)
 class StationsResult:
     """What a stations mission reports: its points, the effective mission time of the return
     (None: never returned), and the fraction of the connectivity samples taken while every
@@ -213,6 +234,7 @@ class StationsResult:
     points: tuple[PointHeld, ...]
     return_s: float | None
     held_connected_fraction: float | None
+    relieved: tuple[UavRelieved, ...] = ()
 
 
 class ReturnRefused(ValueError):
@@ -305,6 +327,8 @@ class Recorder(Protocol):
 
     def return_home(self, record: ReturnRecord, wall: float) -> None: ...
 
+    def relief(self, record: ReliefRecord, wall: float) -> None: ...
+
 
 @dataclass(frozen=True, eq=False)
 class _Evaluation:
@@ -341,6 +365,9 @@ class NullRecorder:
         return None
 
     def return_home(self, record: ReturnRecord, wall: float) -> None:
+        return None
+
+    def relief(self, record: ReliefRecord, wall: float) -> None:
         return None
 
     def fix(self, uav: int, lat: float, lon: float, alt: float, wall: float) -> None:
@@ -416,6 +443,7 @@ class GroundStation:
         self._last_station_tick: float | None = None
         self._held_samples = 0
         self._held_connected = 0
+        self._battery_noted: set[int] = set()  # UAVs whose low battery was acted on
         if self._station_xy is not None:
             planned = self._planned_return()
             if planned is None:
@@ -453,9 +481,21 @@ class GroundStation:
             vehicle_radius=mission.vehicle.radius,
         )
         self.current_speed = plan.speeds.initial
-        # where each UAV holds (stations missions; the outbound formation's, fixed)
+        # where each UAV holds (stations missions; changed only by a relief)
         stations = self.formation.stations is not None
         self._station_xy = self.formation.station_slots if stations else None
+        self.roster = self._roster(plan) if stations else None
+
+    @staticmethod
+    def _roster(plan) -> Roster | None:
+        """Which UAV flies which row of a stations formation (reliefs, `gcs relieve`)."""
+        route, mission = plan.route, plan.mission
+        if route is None or route.layout is None:
+            return None
+        names = tuple(mission.stations[i].name for i in route.order.tolist())
+        return Roster(
+            plan.formation, route.point_distance, names, np.array(mission.base_station_points)
+        )
 
     # ------------------------------------------------------------------ public
     @property
@@ -678,6 +718,25 @@ class GroundStation:
             return {"ok": False, "reason": str(refused)}
         return {"ok": True, "effective_s": record.effective_s, "distance": record.distance}
 
+    def operator_relieve(self, uav: int | None, error: str | None, now: float) -> dict:
+        """A request of `gcs relieve N` (the operator socket); returns the answer to send back:
+        `{"ok": true, "uav": n, "effective_s": t, "landing_xy": [x, y]}` or `{"ok": false,
+        "reason": ...}`."""
+        if error:
+            return {"ok": False, "reason": error}
+        if not self.clock.anchored:
+            return {"ok": False, "reason": "the fleet is not flying yet"}
+        try:
+            plan = self._relieve(self.clock.mission_time(now), now, uav, "operator")
+        except ReliefRefused as refused:
+            return {"ok": False, "reason": str(refused)}
+        return {
+            "ok": True,
+            "uav": uav,
+            "effective_s": plan.start_s,
+            "landing_xy": [float(v) for v in plan.landing_xy],
+        }
+
     def operator_command(self, line: str, now: float) -> None:
         """A line typed in the live view: a speed (m/s) [@T], return [@T], or 'land'."""
         if self.clock.anchored and not self.aborting:
@@ -702,6 +761,8 @@ class GroundStation:
         self._handle_interrupts(now)
         self._handle_requests(t, now)
         self._schedule_uavs(t, now)
+        if self.roster is not None:
+            self._relief_due(t, now)
         evaluation = self._evaluate(t)
         self._stream(t, now, evaluation)
         for driver in self.drivers:
@@ -806,7 +867,7 @@ class GroundStation:
             return t_from
         if distances[-1] - distances[0] < 1e-6:
             return t_to
-        virtual = self.formation.positions(distances)[:, following]  # (count, k, 2)
+        virtual = self._virtual(distances)[:, following]  # (count, k, 2)
         positions = np.array([self.tracks[i].last_position[:2] for i in following])
         worst = np.hypot(*(virtual - positions).transpose(2, 0, 1)).max(axis=1)
         return float(times[int(np.argmin(worst))])
@@ -894,6 +955,8 @@ class GroundStation:
         if self.returned is not None:
             self._planned_return_done = True  # the operator asked first
             return
+        if self.roster is not None and self.roster.active is not None:
+            return  # a UAV is being relieved: the return comes once it has landed
         planned = self._planned_return()
         if planned is None:
             self._planned_return_done = True
@@ -930,6 +993,12 @@ class GroundStation:
             )
         if at is not None and not math.isfinite(at):
             raise ReturnRefused(f"the return time must be a finite mission time, got {at!r}")
+        active = None if self.roster is None else self.roster.active
+        if active is not None:
+            raise ReturnRefused(
+                f"UAV {active.index + 1} is being relieved: the fleet returns once it has "
+                f"landed (about t={active.plan.home_s:.2f} s)"
+            )
         earliest = self.speeds.earliest(t)
         effective = earliest if at is None else max(float(at), earliest)
         # the speed in force before (holding: the one it had when it stopped on station)
@@ -1000,20 +1069,154 @@ class GroundStation:
         route = self.plan.route
         if self._station_xy is None or route is None or route.layout is None:
             return None
+        holders = route.layout.holders if self.roster is None else self.roster.holders
         points = tuple(
             PointHeld(
                 name=self.mission.stations[index].name,
                 uav=int(uav),
                 on_station_s=float(self._on_station_s[int(uav) - 1]),
             )
-            for index, uav in zip(route.order.tolist(), route.layout.holders.tolist(), strict=True)
+            for index, uav in zip(route.order.tolist(), holders.tolist(), strict=True)
         )
         held = self._held_connected / self._held_samples if self._held_samples else None
+        reliefs = () if self.roster is None else self.roster.reliefs
+        relieved = tuple(
+            UavRelieved(
+                uav=relief.index + 1,
+                source=relief.source,
+                asked_s=relief.asked_s,
+                landing=(float(relief.plan.landing_xy[0]), float(relief.plan.landing_xy[1])),
+                landed_s=self.tracks[relief.index].landed_time,
+                on_station_s=float(self._on_station_s[relief.index]),
+            )
+            for relief in reliefs
+        )
         return StationsResult(
             points=points,
             return_s=None if self.returned is None else self.returned.effective_s,
             held_connected_fraction=held,
+            relieved=relieved,
         )
+
+    # ------------------------------------------------------------------ reliefs
+    def _relieve(self, t: float, now: float, uav: int | None, source: str):
+        """Send UAV `uav` home alone from its station (`planner.relief`), asked at mission
+        time `t` by `source`: it climbs above the chain, the UAVs of its gap close up, it flies
+        home above the route and lands on the last free slot of the start row; the UAVs left
+        on station fly on as a formation of one UAV fewer. Returns the `ReliefPlan`; raises
+        `ReliefRefused` with the reason."""
+        roster = self.roster
+        if roster is None:
+            raise ReliefRefused(
+                "this mission has no stations: its UAVs fly from A to B together, none alone"
+            )
+        if uav is None or not 1 <= uav <= self.size:
+            raise ReliefRefused(f"there is no UAV {uav} (the fleet has UAVs 1 to {self.size})")
+        if self.aborting:
+            raise ReliefRefused(f"the fleet is landing ({self.reason})")
+        if self.returned is not None:
+            raise ReliefRefused("the fleet is returning home already")
+        if roster.relieved[uav - 1]:
+            raise ReliefRefused(f"UAV {uav} was relieved already")
+        if roster.active is not None:
+            other = roster.active
+            raise ReliefRefused(
+                f"UAV {other.index + 1} is being relieved (home at about "
+                f"t={other.plan.home_s:.2f} s): one relief at a time"
+            )
+        if not (self._holding() and self.on_station):
+            raise ReliefRefused(
+                "a UAV is relieved from its station: wait until every UAV holds its station"
+            )
+        if self.frozen_by is not None:
+            raise ReliefRefused(f"the formation is frozen ({self.frozen_by})")
+        unavailable = self._unavailable()
+        if unavailable:
+            index, why = next(iter(unavailable.items()))
+            raise ReliefRefused(f"UAV {index + 1} is not flying the formation ({why})")
+        vehicle = self.mission.vehicle
+        plan = roster.plan(
+            uav,
+            t,
+            self._hold[1],
+            RELIEF_ACCELERATION_SHARE * vehicle.max_acceleration,
+            self.options.climb_rate_mps,
+        )
+        self.formation = roster.adopt(plan, source, t)
+        self._station_xy = roster.station_xy()
+        layout = plan.layout
+        self.recorder.relief(
+            ReliefRecord(
+                t=t,
+                uav=uav,
+                source=source,
+                start_s=plan.start_s,
+                climbed_s=plan.climbed_s,
+                closed_s=plan.closed_s,
+                home_s=plan.home_s,
+                landing=[float(v) for v in plan.landing_xy],
+                lane_offset_m=plan.lane_offset,
+                stations=[None if math.isnan(v) else float(v) for v in layout.stations],
+                holders=[int(v) for v in layout.holders],
+                members=[int(v) for v in layout.members],
+            ),
+            now,
+        )
+        moving = sorted(other for other, _ in plan.moves)
+        closing = (
+            f"UAV {', '.join(map(str, moving))} close the gap by t={plan.closed_s:.2f} s"
+            if moving
+            else "nobody needs to move"
+        )
+        x, y = plan.landing_xy
+        text = (
+            f"UAV {uav} relieved ({_RELIEF_SOURCES[source]}): it climbs "
+            f"{plan.lane_offset:.1f} m above the chain, {closing}, it flies home above the "
+            f"route and lands on the start-row slot ({x:.1f}, {y:.1f}) at about "
+            f"t={plan.home_s:.2f} s"
+        )
+        self._event(MonitorEvent(t, "info", "relief", text, uav), now)
+        return plan
+
+    def _relief_due(self, t: float, now: float) -> None:
+        """The relieved UAV lands once above its slot; a relief is over once it has landed.
+        A UAV on station whose battery is below `stations.relieve_below_pct` is relieved."""
+        roster = self.roster
+        active = roster.active
+        if active is not None:
+            index, plan = active.index, active.plan
+            driver, track = self.drivers[index], self.tracks[index]
+            if not track.land_sent and t >= plan.home_s:
+                offset = self._slot_offset(index, t)
+                if (
+                    offset <= self.options.landing_tolerance_m
+                    or t >= plan.home_s + self.options.landing_settle_s
+                ):
+                    track.land_sent = True
+                    driver.land(now)
+            if driver.phase in (Phase.LANDED, Phase.FAILED):
+                roster.active = None
+        threshold = getattr(self.mission, "relieve_below_pct", None)
+        if threshold is None or roster.active is not None:
+            return
+        if not (self._holding() and self.on_station):
+            return
+        for index, driver in enumerate(self.drivers):
+            level = getattr(driver.telemetry, "battery_remaining_pct", None)
+            if level is None or level >= threshold or index in self._battery_noted:
+                continue
+            if roster.relieved[index]:
+                continue
+            self._battery_noted.add(index)
+            try:
+                self._relieve(t, now, index + 1, "battery")
+                return
+            except ReliefRefused as refused:
+                text = (
+                    f"UAV {index + 1}: battery {level:g} % below {threshold:g} %, but it "
+                    f"stays: {refused}"
+                )
+                self._event(MonitorEvent(t, "warning", "relief_refused", text, index + 1), now)
 
     def _deferred(self, speed: float, t: float, source: str, now: float) -> bool:
         """While the formation is frozen, a scheduled or leader change is not flown: it becomes
@@ -1044,13 +1247,21 @@ class GroundStation:
         if words[0] == "land":
             self.land_everyone("the operator asked everyone to land", now)
             return
+        usage = f"type a speed (m/s) [@T], return [@T], relieve N, or land; not {line.strip()!r}"
+        if words[0] == "relieve":
+            if len(words) != 2 or not words[1].isdigit():
+                self.view.message("warning", usage)
+                return
+            try:
+                self._relieve(t, now, int(words[1]), "operator")
+            except ReliefRefused as refused:
+                self.view.message("warning", f"relief refused: {refused}")
+            return
         try:
             at = float(words[1].lstrip("@")) if len(words) > 1 else None
             speed = None if words[0] == "return" else float(words[0])
         except ValueError:
-            self.view.message(
-                "warning", f"type a speed (m/s) [@T], return [@T], or land; not {line.strip()!r}"
-            )
+            self.view.message("warning", usage)
             return
         if speed is None:
             try:
@@ -1124,8 +1335,14 @@ class GroundStation:
 
     def _schedule_uavs(self, t: float, now: float) -> None:
         formation = self.formation
+        roster = self.roster
         departures = self.profile.time_at_distance(formation.departure_distance)
         arrivals = self.profile.time_at_distance(formation.arrival_distance)
+        relieved = np.zeros(self.size, dtype=bool)
+        if roster is not None and roster.reshaped:  # rows -> UAVs; a relieved UAV: its own
+            departures = roster.expand(departures, math.inf)
+            arrivals = roster.expand(arrivals, math.inf)
+            relieved = roster.relieved
         lead = self.takeoff_lead_s()
         horizon = t + self.speeds.lead_s + 2 * self.tick_period_wall * self.options.speedup
         # a stations formation holds its UAVs on their stations until it returns
@@ -1134,13 +1351,17 @@ class GroundStation:
         stays = (
             formation.departure_distance >= formation.return_distance - DISTANCE_TOLERANCE
             if formation.returning
-            else np.zeros(self.size, dtype=bool)
+            else np.zeros(formation.fleet_size, dtype=bool)
         )
+        if roster is not None and roster.reshaped:
+            stays = roster.expand(stays, False)
         late = []
         for index, driver in enumerate(self.drivers):
             track = self.tracks[index]
             if self.aborting:
                 break
+            if relieved[index]:
+                continue
             if stays[index]:
                 if not track.land_sent:
                     track.land_sent = True
@@ -1191,7 +1412,7 @@ class GroundStation:
         track = self.tracks[index]
         if track.last_position is None:
             return math.inf
-        slot = self.formation.goal_slots[index]
+        slot = self._goal_slots()[index]
         return float(np.hypot(*(track.last_position[:2] - slot)))
 
     def _evaluate(self, t: float) -> _Evaluation:
@@ -1201,13 +1422,51 @@ class GroundStation:
         samples, self._samples = self._samples, []
         times = np.array([t] + [sample[1] for sample in samples])
         distances = self.profile.distance(times)
-        return _Evaluation(
-            samples,
-            times,
-            distances,
-            self.formation.positions(distances),
-            smoothed_reference(self.formation, self.profile, times, self.window_s),
-        )
+        virtual = self.formation.positions(distances)
+        reference = smoothed_reference(self.formation, self.profile, times, self.window_s)
+        roster = self.roster
+        if roster is not None and roster.reshaped:  # rows -> UAVs, and the relief's motions
+            virtual = roster.expand(virtual, np.nan, axis=-2)
+            reference = Reference(
+                roster.expand(reference.positions, np.nan, axis=-2),
+                roster.expand(reference.velocities, 0.0, axis=-2),
+                roster.expand(reference.accelerations, 0.0, axis=-2),
+            )
+            virtual, reference = roster.overlay(times, virtual, reference)
+        return _Evaluation(samples, times, distances, virtual, reference)
+
+    def _virtual(self, distances: np.ndarray) -> np.ndarray:
+        """V_n at formation distances, one column per UAV (a relieved UAV: its landing
+        slot)."""
+        virtual = self.formation.positions(distances)
+        if self.roster is None or not self.roster.reshaped:
+            return virtual
+        landing = self.roster.landing_xy()[self.roster.relieved]
+        return self.roster.expand(virtual, landing, axis=-2)
+
+    def virtual_targets(self, t: float) -> np.ndarray:
+        """(N, 2): V_n at mission time `t` per UAV, a relief's motions included (the fast
+        mode's tracking errors)."""
+        times = np.array([float(t)])
+        virtual = self._virtual(self.profile.distance(times))
+        if self.roster is not None:
+            virtual = self.roster.overlay_positions(times, virtual)
+        return virtual[0]
+
+    def out_of_fleet(self) -> np.ndarray:
+        """(N,) bool: UAVs relieved and landed, no longer part of the chain."""
+        if self.roster is None or not self.roster.reshaped:
+            return np.zeros(self.size, dtype=bool)
+        landed = np.array([d.phase == Phase.LANDED for d in self.drivers])
+        return self.roster.relieved & landed
+
+    def _goal_slots(self) -> np.ndarray:
+        """(N, 2) where each UAV ends: its row's goal slot, a relieved UAV its landing slot."""
+        slots = self.formation.goal_slots
+        if self.roster is None or not self.roster.reshaped:
+            return slots
+        landing = self.roster.landing_xy()[self.roster.relieved]
+        return self.roster.expand(slots, landing, axis=-2)
 
     def _stream(self, t: float, now: float, evaluation: _Evaluation) -> None:
         streaming = [
@@ -1222,16 +1481,18 @@ class GroundStation:
         vxy = reference.velocities[0, idx]
         axy = reference.accelerations[0, idx]
         count = len(idx)
-        up = np.full(count, float(self.altitude))
+        vertical = np.zeros((count, 3))  # height above the mission altitude, rate, acceleration
+        if self.roster is not None and self.roster.active is not None:
+            vertical = self.roster.heights(t)[idx]
+        up = float(self.altitude) + vertical[:, 0]
         geodetic = enu_to_geodetic(xy[:, 0], xy[:, 1], up, self.mission.origin).reshape(count, 3)
         virtual = evaluation.virtual[0, idx]
         speed = float(self.profile.speed_at(t))
         distance = float(evaluation.distances[0])
         self.current_speed = float(self.profile.speed_at(max(t, 0.0)))  # commanded, for the view
-        zero = np.zeros(count)
         position = np.column_stack([xy, up])
-        velocity = np.column_stack([vxy, zero])
-        acceleration = np.column_stack([axy, zero])
+        velocity = np.column_stack([vxy, vertical[:, 1]])
+        acceleration = np.column_stack([axy, vertical[:, 2]])
         # Python lists once per tick: the per-UAV loop below is the hot path.
         positions, velocities = position.tolist(), velocity.tolist()
         accelerations, virtuals, geo = acceleration.tolist(), virtual.tolist(), geodetic.tolist()
@@ -1352,7 +1613,17 @@ class GroundStation:
             fleet[index, :2] = xy
             fleet[index, 2] = track.last_position[2]
         positions = fleet[:, :2]
-        events += self.safety.positions(t, positions)
+        heights = excluded = None
+        roster = self.roster
+        if roster is not None and roster.reshaped:
+            excluded = self.out_of_fleet()
+            if roster.active is not None and not excluded[roster.active.index]:
+                heights = fleet[:, 2]  # one UAV flies home above the chain
+        events += self.safety.positions(t, positions, heights, excluded)
+        # what `gcs log report` checks again: with the heights while a UAV flies above the
+        # chain, and who is out of the fleet since a relief
+        recorded = positions if heights is None else fleet
+        out_of_fleet = None if excluded is None else [int(i) + 1 for i in np.flatnonzero(excluded)]
         self.recorder.fleet(t, fleet, evaluation.virtual[0], now)
         silent = np.array([d.link.silent_for(now) for d in self.drivers])
         timeout = max(
@@ -1379,7 +1650,8 @@ class GroundStation:
                     tracking_error_m=[_finite(e) for e in self.tracking_now.tolist()],
                     connected=stats.last_connected,
                     # the sample the monitors checked: `gcs log report` re-checks it
-                    positions=[None if math.isnan(p[0]) else p for p in positions.tolist()],
+                    positions=[None if math.isnan(p[0]) else p for p in recorded.tolist()],
+                    out_of_fleet=out_of_fleet,
                 ),
                 now,
             )
@@ -1548,11 +1820,10 @@ class GroundStation:
         takeoffs = [tr.takeoff_time for tr in self.tracks if tr.takeoff_time is not None]
         landings = [tr.landed_time for tr in self.tracks if tr.landed_time is not None]
         landing_error = []
+        goal_slots = self._goal_slots()
         for index, track in enumerate(self.tracks):
             xy = track.final_xy
-            landing_error.append(
-                None if xy is None else float(np.hypot(*(xy - self.formation.goal_slots[index])))
-            )
+            landing_error.append(None if xy is None else float(np.hypot(*(xy - goal_slots[index]))))
         on_slots = all(e is not None and e < self.mission.safety_margin for e in landing_error)
         completed = (
             not self.aborting

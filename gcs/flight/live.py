@@ -136,13 +136,15 @@ class LiveLoop:
             self.station.fleet_reports(now, self.fleet.poll(), reports)
 
     def _poll_operator(self, now: float) -> None:
-        """The operator socket (`gcs speed`, `gcs return`) and the lines typed in the live
-        view."""
+        """The operator socket (`gcs speed`, `gcs return`, `gcs relieve`) and the lines typed
+        in the live view."""
         station = self.station
         if self.operator is not None:
             for request in self.operator.poll():
                 if request.command == "return":
                     answer = station.operator_return(request.at, request.error, now)
+                elif request.command == "relieve":
+                    answer = station.operator_relieve(request.uav, request.error, now)
                 else:
                     answer = station.operator_request(request.speed, request.at, request.error, now)
                 request.reply(answer)

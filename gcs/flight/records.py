@@ -143,6 +143,9 @@ class MetricsRecord(_Record):
     tracking_error_m: list[float | None]  # per UAV, now
     connected: bool | None  # is every UAV chained to a base station now
     positions: list[Vector | None]  # the fleet the monitors checked (x, y, z; None: unknown)
+    # since a relief: the UAVs out of the fleet (relieved and landed), left out of the checks;
+    # while a relieved UAV flies above the chain the positions are (x, y, z), the checks 3-D
+    out_of_fleet: list[int] | None = None
 
 
 @_declare
@@ -171,3 +174,31 @@ class ReturnRecord(_Record):
     effective_s: float
     distance: float  # M, m: V_n(S) = V_n(2 M - S) from there on
     source: str
+
+
+@_declare
+class ReliefRecord(_Record):
+    """One UAV relieved from its station (topic `/relief`, stations missions only), asked at
+    mission time `t` by `source` ("operator": `gcs relieve`; "battery": its battery below
+    `stations.relieve_below_pct`): from `start_s` it climbs `lane_offset_m` above the chain
+    (done at `climbed_s`), the UAVs of its gap close up (done at `closed_s`), it flies home
+    above the route and stands above `landing` (a start-row slot) at `home_s`, then lands.
+    `stations` is s_n per UAV afterwards (null: relieved), `holders` the UAV on each point
+    (visiting order), `members` the UAVs still on station, by rank."""
+
+    ALWAYS: ClassVar[frozenset[str]] = frozenset(
+        {"t", "uav", "source", "start_s", "closed_s", "home_s", "landing"}
+    )
+
+    t: float
+    uav: int
+    source: str
+    start_s: float
+    climbed_s: float
+    closed_s: float
+    home_s: float
+    landing: Vector
+    lane_offset_m: float
+    stations: list[float | None]
+    holders: list[int]
+    members: list[int]

@@ -10,6 +10,7 @@ Topics. Foxglove's well-known schemas (protobuf), so its panels work without con
   building footprints and walls; path, rows, stations), repeated every `GEOJSON_PERIOD_S`.
 JSON with a titled JSON schema (`SCHEMAS`): `/plan`, `/uav<n>/setpoint`, `/uav<n>/state`,
 `/speed` (requests, acknowledgements), `/return` (a stations mission's return home),
+`/relief` (a UAV relieved from its station),
 `/metrics` (per tick, with the fleet positions the monitors sampled), `/fleet` (per tick: the instant's smallest distances and radio links),
 `/radio` (radio-medium counters, when a medium reports them), `/mavlink/<n>/rx|tx` (every
 MAVLink message: raw bytes in base64 plus the decoded fields).
@@ -57,6 +58,7 @@ from foxglove.messages import GeoJson, LocationFix, Log, LogLevel, SceneUpdate, 
 from gcs.flight.records import (
     MetricsRecord,
     RadioRecord,
+    ReliefRecord,
     ReturnRecord,
     SetpointRecord,
     SpeedRecord,
@@ -165,6 +167,24 @@ SCHEMAS: dict[str, dict] = {
         {"t": _NUM, "effective_s": _NUM, "distance": _NUM, "source": _STR},
         ["t", "effective_s", "distance", "source"],
     ),
+    "relief": _schema(
+        "fleetline.Relief",
+        {
+            "t": _NUM,
+            "uav": _INT,
+            "source": _STR,
+            "start_s": _NUM,
+            "climbed_s": _NUM,
+            "closed_s": _NUM,
+            "home_s": _NUM,
+            "landing": _VEC,
+            "lane_offset_m": _NUM,
+            "stations": {"type": "array", "items": _NUM_OR_NULL},
+            "holders": {"type": "array", "items": _INT},
+            "members": {"type": "array", "items": _INT},
+        },
+        ["t", "uav", "source", "start_s", "closed_s", "home_s", "landing"],
+    ),
     "metrics": _schema(
         "fleetline.Metrics",
         {
@@ -177,6 +197,7 @@ SCHEMAS: dict[str, dict] = {
             "tracking_error_m": {"type": "array", "items": _NUM_OR_NULL},
             "connected": {"type": ["boolean", "null"]},
             "positions": {"type": "array", "items": _VEC_OR_NULL},
+            "out_of_fleet": {"type": "array", "items": _INT},
         },
         ["t"],
     ),
@@ -411,6 +432,10 @@ class FlightRecorder:
     def return_home(self, record: ReturnRecord, wall: float) -> None:
         """A stations mission's return home (`fleetline.Return` on `/return`)."""
         self.write(self.channel("/return", "return"), record.to_json(), wall)
+
+    def relief(self, record: ReliefRecord, wall: float) -> None:
+        """A UAV relieved from its station (`fleetline.Relief` on `/relief`)."""
+        self.write(self.channel("/relief", "relief"), record.to_json(), wall)
 
     def fix(self, uav: int, latitude: float, longitude: float, altitude: float, wall: float):
         """A `foxglove.LocationFix` on `/uav<n>/fix` (Foxglove's Map panel)."""

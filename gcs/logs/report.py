@@ -88,6 +88,11 @@ class Flight:
     telemetry_times: list[np.ndarray]  # per UAV: mission time of each message received
     radio: list[dict]
     run: dict | None  # the run JSON the GCS wrote (attachment), if it finished
+    # reliefs (`/relief`): the samples' heights (S, N), NaN unless a relieved UAV flew above
+    # the chain (the checks were 3-D), and the UAVs out of the fleet (S, N)
+    reliefs: list[dict] = field(default_factory=list)
+    sample_heights: np.ndarray | None = None
+    sample_out: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,10 +140,16 @@ def load_flight(recording: Recording) -> Flight:
     ]
     sample_times = np.array([m["t"] for m in samples], float)
     sample_positions = np.full((len(samples), size, 2), np.nan)
+    sample_heights = np.full((len(samples), size), np.nan)
+    sample_out = np.zeros((len(samples), size), dtype=bool)
     for k, sample in enumerate(samples):
         for index, xy in enumerate(sample["positions"][:size]):
             if xy is not None:
                 sample_positions[k, index] = xy[:2]
+                if len(xy) > 2:
+                    sample_heights[k, index] = xy[2]
+        for uav in sample.get("out_of_fleet") or ():
+            sample_out[k, uav - 1] = True
     if not samples:  # an older log: resample the true tracks on the metrics' times
         sample_times = np.array([m["t"] for _, m in recording.messages("/metrics")], float)
         sample_positions = _resample(tracks, sample_times)
@@ -164,6 +175,9 @@ def load_flight(recording: Recording) -> Flight:
         telemetry_times=telemetry,
         radio=[m for _, m in recording.messages("/radio")],
         run=recording.json_attachment("run.json"),
+        reliefs=[m for _, m in recording.messages("/relief")],
+        sample_heights=sample_heights,
+        sample_out=sample_out,
     )
 
 
@@ -269,34 +283,50 @@ def flight_metrics(flight: Flight) -> FlightMetrics:
     """Guarantee checks on every fleet sample and tracking errors on every track sample.
 
     As the GCS's monitors do: distances over the UAVs known at a sample (at least one), the
-    connectivity only at samples where every UAV is known."""
+    connectivity only at samples where every UAV is known. Since a relief: the UAVs out of the
+    fleet are left out, the samples with heights are checked in 3-D, and the tracking errors
+    are the ground station's own (its V_n flew the relief's motions and the formation of the
+    UAVs left; the plan's formation is rebuilt only up to the first relief)."""
     positions = flight.sample_positions
-    count = len(positions)
+    count, size = positions.shape[:2]
     pair = np.full(count, np.nan)
     obstacle = np.full(count, np.nan)
     connected = np.full(count, np.nan)
     obstacles = flight.mission.obstacles if flight.mission is not None else Obstacles()
     stations = _base_stations(flight)
-    known = np.isfinite(positions).all(axis=2)  # (S, N)
-    masks, groups = np.unique(known, axis=0, return_inverse=True)
-    for g, mask in enumerate(masks):
+    out = flight.sample_out if flight.sample_out is not None else np.zeros((count, size), bool)
+    heights = flight.sample_heights
+    lane = np.zeros(count, bool) if heights is None else np.isfinite(heights).any(axis=1)
+    known = np.isfinite(positions).all(axis=2) & ~out  # (S, N)
+    keys = np.column_stack([known, out, lane])
+    masks, groups = np.unique(keys, axis=0, return_inverse=True)
+    for g, key in enumerate(masks):
+        mask, left, above = key[:size], key[size : 2 * size], key[-1]
         if not mask.any():
             continue
         rows = np.flatnonzero(groups.reshape(-1) == g)
-        checked = check_positions(positions[rows][:, mask], obstacles, stations, flight.radio_range)
+        checked = check_positions(
+            positions[rows][:, mask],
+            obstacles,
+            stations,
+            flight.radio_range,
+            np.nan_to_num(heights[rows][:, mask]) if above else None,
+        )
         pair[rows] = np.where(np.isfinite(checked.min_uav_uav_m), checked.min_uav_uav_m, np.nan)
         obstacle[rows] = np.where(
             np.isfinite(checked.min_uav_obstacle_m), checked.min_uav_obstacle_m, np.nan
         )
-        if mask.all():
+        if (mask | left).all():
             connected[rows] = checked.connected.astype(float)
+    relieved_from = min((float(r["t"]) for r in flight.reliefs), default=math.inf)
     errors = []
     for index, track in enumerate(flight.tracks):
         if flight.formation is None or not len(track.times):
             errors.append(track.logged_error)
             continue
         virtual = flight.formation.positions(flight.profile.distance(track.times))[:, index]
-        errors.append(np.hypot(*(track.positions[:, :2] - virtual).T))
+        error = np.hypot(*(track.positions[:, :2] - virtual).T)
+        errors.append(np.where(track.times < relieved_from, error, track.logged_error))
     metrics = FlightMetrics(pair, obstacle, connected, errors)
     metrics.summary.update(_summary(flight, metrics))
     return metrics

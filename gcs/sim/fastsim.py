@@ -12,8 +12,8 @@ after their hops' delay.
 
 Differences from a networked run: no recording unless asked (`FastOptions.log`; the run
 JSON's `log` is null without one, and the MAVLink topics are never written), no signing, and
-the vehicles skip the telemetry streams the core does not read (attitude, battery, VFR_HUD,
-local position). Nobody is there to ask a stations mission's fleet home: without `return.at`
+the vehicles skip the telemetry streams the core does not read (attitude, BATTERY_STATUS,
+VFR_HUD, local position; the battery level comes with SYS_STATUS). Nobody is there to ask a stations mission's fleet home: without `return.at`
 or a `dwell_s` on every point, it returns as soon as every UAV is on station
 (`RunOptions.return_when_on_station`). The result is the run JSON of CONTRACTS.md plus the
 time series the paper's figures need, sampled from the true state of the simulation.
@@ -53,7 +53,7 @@ FAST_QUIET_STREAMS = tuple(
     - {
         mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,  # the drivers' telemetry
         mavlink.MAVLINK_MSG_ID_SIM_STATE,  # the core's true positions
-        mavlink.MAVLINK_MSG_ID_SYS_STATUS,  # pre-arm checks
+        mavlink.MAVLINK_MSG_ID_SYS_STATUS,  # pre-arm checks, battery level
         mavlink.MAVLINK_MSG_ID_HOME_POSITION,  # the home check before arming
     }
     | {mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED}
@@ -78,6 +78,10 @@ class Faults:
     operator_requests: tuple[tuple[float, float, float | None], ...] = ()
     #: (when, effective time or None): `gcs return` requests of the operator
     operator_returns: tuple[tuple[float, float | None], ...] = ()
+    #: (when, UAV id): `gcs relieve` requests of the operator
+    operator_reliefs: tuple[tuple[float, int], ...] = ()
+    #: (when, line): lines the operator types in the live view ("5 @120", "return", ...)
+    typed: tuple[tuple[float, str], ...] = ()
     #: when the operator presses Ctrl-C
     interrupts: tuple[float, ...] = ()
 
@@ -116,8 +120,10 @@ class FastRun:
     mission s; `kind` indexes `medium.radio_stats.KINDS`); `speed_changes` each change with
     the mission time each UAV received it (`received_s`) and, for a leader's request, the time
     the leader sent it (`leader_sent_s`); `takeoff_s` and `landed_s` (N,) mission times (NaN:
-    never); `operator_answers` the answers to `Faults.operator_requests` and
-    `operator_returns`, in the order asked; `stalls` the core's stall records.
+    never); `operator_answers` the answers to `Faults.operator_requests`, `operator_returns`
+    and `operator_reliefs`, in the order asked; `stalls` the core's stall records;
+    `battery_remaining_pct` (N,) the last battery level (%, SYS_STATUS) each UAV reported
+    (NaN: none).
     """
 
     run_json: dict
@@ -135,6 +141,7 @@ class FastRun:
     landed_s: np.ndarray
     operator_answers: list[dict] = field(default_factory=list)
     stalls: list = field(default_factory=list)  # the core's `Stall` records
+    battery_remaining_pct: np.ndarray = field(default_factory=lambda: np.empty(0))
 
 
 def with_fleet_size(plan: MissionPlan, fleet_size: int) -> MissionPlan:
@@ -230,6 +237,7 @@ class _LockstepMission:
                 autopilot=AutopilotConfig(waypoint_speed_mps=mission.vehicle.max_speed),
                 leader_requests={uav: tuple(r) for uav, r in leaders.items()},
                 quiet_streams=FAST_QUIET_STREAMS,
+                battery_mah=mission.sim.battery_capacities(size),
             )
         )
         self.medium = MediumModel(
@@ -290,6 +298,9 @@ class _LockstepMission:
         self._times: list[float] = []
         self._positions: list[np.ndarray] = []
         self._hops: list[np.ndarray] = []
+        # sample index -> (V_n as flown, UAVs out of the fleet, one flying home above): the
+        # samples taken since a relief (`_sample`)
+        self._relieved_samples: dict[int, tuple[np.ndarray, np.ndarray, bool]] = {}
 
     def _recorder(self, path: Path):
         """A `FlightRecorder` on the simulated clock, the plan described."""
@@ -325,6 +336,8 @@ class _LockstepMission:
         connected = False
         operator = sorted(faults.operator_requests)
         returns = sorted(faults.operator_returns, key=lambda request: request[0])
+        reliefs = sorted(faults.operator_reliefs)
+        typed = sorted(faults.typed)
         interrupts = sorted(faults.interrupts)
         was_stalled = False
         while True:
@@ -344,6 +357,11 @@ class _LockstepMission:
                 while returns and vehicle_t >= returns[0][0]:
                     _, at = returns.pop(0)
                     self.operator_answers.append(station.operator_return(at, None, sim_s))
+                while reliefs and vehicle_t >= reliefs[0][0]:
+                    _, uav = reliefs.pop(0)
+                    self.operator_answers.append(station.operator_relieve(uav, None, sim_s))
+                while typed and vehicle_t >= typed[0][0]:
+                    station.operator_command(typed.pop(0)[1], sim_s)
                 while interrupts and vehicle_t >= interrupts[0]:
                     interrupts.pop(0)
                     station.interrupt()
@@ -433,9 +451,47 @@ class _LockstepMission:
 
     # ------------------------------------------------------------------ samples and result
     def _sample(self, sim_s: float) -> None:
-        self._times.append(self.mission_time(sim_s))
+        t = self.mission_time(sim_s)
+        self._times.append(t)
         self._positions.append(self.fleet.dynamics.position.copy())
         self._hops.append(self.medium.topology_at(sim_s).hops.copy())
+        roster = self.station.roster
+        if roster is not None and roster.reshaped:  # a relief: V_n as flown, who is out
+            self._relieved_samples[len(self._times) - 1] = (
+                self.station.virtual_targets(t),
+                self.station.out_of_fleet(),
+                roster.active is not None,
+            )
+
+    def _relief_checks(self, checks: GuaranteeSamples, positions: np.ndarray) -> GuaranteeSamples:
+        """The guarantee checks of the samples taken since a relief: the relieved UAVs that
+        landed are out of the fleet; while one flies home above the chain, UAV-UAV distances
+        and links are 3-D (`check_positions`)."""
+        mission = self.mission
+        closest, obstacle = checks.min_uav_uav_m.copy(), checks.min_uav_obstacle_m.copy()
+        connected, max_hops = checks.connected.copy(), checks.max_hops.copy()
+        hops = checks.hops.copy()
+        for k, (_, out, lane) in self._relieved_samples.items():
+            keep = ~out
+            sample = check_positions(
+                positions[k : k + 1, keep, :2],
+                mission.obstacles,
+                base_stations(mission),
+                mission.radio_range,
+                positions[k : k + 1, keep, 2] if lane else None,
+            )
+            closest[k], obstacle[k] = sample.min_uav_uav_m[0], sample.min_uav_obstacle_m[0]
+            connected[k], max_hops[k] = sample.connected[0], sample.max_hops[0]
+            hops[k] = 0
+            hops[k, keep] = sample.hops[0]
+        return replace(
+            checks,
+            min_uav_uav_m=closest,
+            min_uav_obstacle_m=obstacle,
+            connected=connected,
+            max_hops=max_hops,
+            hops=hops,
+        )
 
     def _speed_changes(self) -> list[dict]:
         """Each change's record, with when each UAV received it and, for a leader's, when the
@@ -460,7 +516,14 @@ class _LockstepMission:
         hops = np.array(self._hops).reshape(len(times), self.size)
         xy = positions[..., :2]
         checks = check_positions(xy, mission.obstacles, base_stations(mission), mission.radio_range)
+        roster = station.roster
+        if roster is not None and roster.reshaped:
+            formation = roster.outbound  # until the first relief; then as sampled
         virtual = formation.positions(station.profile.distance(times))
+        if self._relieved_samples:
+            checks = self._relief_checks(checks, positions)
+            for k, (targets, _, _) in self._relieved_samples.items():
+                virtual[k] = targets
         tracking = np.hypot(*np.moveaxis(xy - virtual, -1, 0))
         result = replace(station.result(), radio=run_json_radio(self.medium.stats.summary()))
         data = run_json(result, "", mission.safety_margin)
@@ -489,6 +552,9 @@ class _LockstepMission:
             landed_s=mission_times(t.landed_time for t in station.tracks),
             operator_answers=self.operator_answers,
             stalls=list(station.stalls),
+            battery_remaining_pct=np.array(
+                [d.telemetry.battery_remaining_pct for d in station.drivers], dtype=float
+            ),
         )
 
 

@@ -194,6 +194,7 @@ class Autopilot:
             airframe=dynamics.config.airframe,
             energy_used_j=float(dynamics.energy_used_j[i]),
             power_w=float(dynamics.power_w[i]),
+            battery_capacity_mah=float(dynamics.battery_capacity_mah[i]),
             home_enu=tuple(self.home_enu.tolist()),
             ekf_origin_enu=tuple(self.ekf_origin_enu.tolist()),
             fleet_speed_mps=self.speeds.fleet_speed(stamp.sim_s, self.mission_clock),

@@ -38,7 +38,7 @@ def parameters(ap: Autopilot) -> list[tuple[str, float, int]]:
         ("WPNAV_ACCEL", airframe.max_acceleration_mps2 * 100, real),
         ("LAND_SPEED", cfg.land_speed_mps * 100, real),
         ("RTL_ALT", cfg.rtl_altitude_m * 100, real),
-        ("BATT_CAPACITY", airframe.battery_capacity_mah, integer),
+        ("BATT_CAPACITY", ap.dynamics.battery_capacity_mah[ap.index], integer),
         ("WPNAV_RADIUS", cfg.waypoint_radius_m * 100, real),
         ("FENCE_ENABLE", 0, integer),  # SYS_STATUS: geofence present, not enabled
         ("AUTO_OPTIONS", 0, integer),  # AUTO neither arms nor takes off without MISSION_START

@@ -34,10 +34,15 @@ class BatteryState:
     time_remaining_s: float
 
 
-def battery_state(airframe: Airframe, used_j: float, power_w: float) -> BatteryState:
-    """The battery of ``airframe`` after ``used_j`` joules, drawing ``power_w`` watts."""
+def battery_state(
+    airframe: Airframe, used_j: float, power_w: float, capacity_mah: float | None = None
+) -> BatteryState:
+    """The battery of ``airframe`` (of ``capacity_mah``, default the airframe's) after
+    ``used_j`` joules, drawing ``power_w`` watts."""
     nominal_v = 3.7 * airframe.battery_cells
-    capacity_j = airframe.battery_capacity_mah * 3.6 * nominal_v
+    if capacity_mah is None:
+        capacity_mah = airframe.battery_capacity_mah
+    capacity_j = capacity_mah * 3.6 * nominal_v
     remaining = max(0.0, 1.0 - used_j / capacity_j)
     voltage = airframe.battery_cells * (3.5 + 0.7 * remaining)
     return BatteryState(
@@ -56,6 +61,7 @@ def battery_of(dynamics: FleetDynamics, index: int) -> BatteryState:
         dynamics.config.airframe,
         float(dynamics.energy_used_j[index]),
         float(dynamics.power_w[index]),
+        float(dynamics.battery_capacity_mah[index]),
     )
 
 
@@ -78,6 +84,7 @@ class AutopilotStatus:
     airframe: Airframe
     energy_used_j: float
     power_w: float
+    battery_capacity_mah: float
     home_enu: tuple[float, float, float]
     ekf_origin_enu: tuple[float, float, float]
     fleet_speed_mps: float | None  # the fleet speed in force, None before any speed change
@@ -150,7 +157,9 @@ class AutopilotStatus:
 
     @property
     def battery(self) -> BatteryState:
-        return battery_state(self.airframe, self.energy_used_j, self.power_w)
+        return battery_state(
+            self.airframe, self.energy_used_j, self.power_w, self.battery_capacity_mah
+        )
 
     @property
     def prearm_ok(self) -> bool:

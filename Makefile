@@ -18,12 +18,15 @@ $(STAMP): requirements.lock requirements-interop.lock pyproject.toml
 demo: $(STAMP)
 	$(BIN)/python -m gcs.cli.demo
 
+# The fast tier on both cores (pure policy and unit tests: no timing, no process, no IP socket),
+# then the flights one at a time (they lower their speed-up on a busy machine).
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -m "not slow" -n 2
+	$(BIN)/python -m pytest -q -m slow
 
 # Unit, core, property and conformance tests: no process started, no IP socket (< 90 s).
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -m "not slow" -n 2
 
 bench: $(STAMP)
 	$(BIN)/python -m bench

@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# The optional engines the tests exercise (CI installs and tests them; the demo does not need them).
+EXTRAS_STAMP := $(VENV)/.installed-extras
 
 .PHONY: demo test test-fast bench lint clean
 
@@ -15,12 +17,16 @@ $(STAMP): requirements.lock requirements-interop.lock pyproject.toml
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
+$(EXTRAS_STAMP): $(STAMP) requirements-ns3.lock
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -r requirements-ns3.lock
+	touch $(EXTRAS_STAMP)
+
 demo: $(STAMP)
 	$(BIN)/python -m gcs.cli.demo
 
 # The fast tier on both cores (pure policy and unit tests: no timing, no process, no IP socket),
 # then the flights one at a time (they lower their speed-up on a busy machine).
-test: $(STAMP)
+test: $(EXTRAS_STAMP)
 	$(BIN)/python -m pytest -q -m "not slow" -n 2
 	$(BIN)/python -m pytest -q -m slow
 
@@ -28,7 +34,7 @@ test: $(STAMP)
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -q -m "not slow" -n 2
 
-bench: $(STAMP)
+bench: $(EXTRAS_STAMP)
 	$(BIN)/python -m bench
 
 lint: $(STAMP)

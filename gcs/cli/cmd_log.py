@@ -1,7 +1,9 @@
-"""`gcs log info|report|replay LOG`: summarise, figure and re-emit a recording (CONTRACTS.md).
+"""`gcs log info|report|replay|netsim LOG`: summarise, figure, re-emit a recording, or replay its
+flight in the ns-3 network simulator (CONTRACTS.md, docs/netsim.md).
 
 Exit statuses: 0 done (a truncated recording is read up to its cut, and said so), 2 bad input
-(not an MCAP file, not a recording of `gcs mission run`, a bad flag).
+(not an MCAP file, not a recording of `gcs mission run`, a bad flag; for `netsim`, ns-3 not
+installed).
 """
 
 from __future__ import annotations
@@ -9,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -17,7 +20,7 @@ from rich.console import Console
 from rich.table import Table
 
 from gcs.cli.outputs import output_folder
-from gcs.errors import InputError
+from gcs.errors import EXIT_BAD_INPUT, InputError
 
 if TYPE_CHECKING:  # the MCAP reader is imported when a command reads a log
     from gcs.logs.logreader import Recording
@@ -79,6 +82,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--uav", type=int, action="append", metavar="N", help="only UAV N (repeatable)"
     )
     replay.set_defaults(handler=replay_command)
+
+    netsim = commands.add_parser(
+        "netsim",
+        help="the flight's network in ns-3: delivery, T_BS, hops, gaps, T_dv (needs the ns3 extra)",
+        description="Replay the recorded trajectories (10 Hz) in the ns-3 network simulator: "
+        "802.11b ad hoc, AODV (or OLSR), 0.8 kbit/s of UDP from each UAV and ground user to "
+        "its base station, each leader's speed request relayed UAV to UAV (the paper) and "
+        "through the ground station. Prints a table per UAV; --out writes netsim.json and "
+        "figures. Exit 0, 2 bad input or ns-3 not installed (docs/netsim.md).",
+    )
+    netsim.add_argument("log", type=Path, metavar="LOG", help="MCAP file")
+    netsim.add_argument("--seed", type=int, default=1, metavar="N",
+                        help="ns-3 run number and data phases (default 1)")  # fmt: skip
+    netsim.add_argument("--propagation", choices=("range", "logdistance"), default="range",
+                        help="range: the paper's disk of rho_R (default); logdistance: "
+                        "log-distance loss, 802.11b sensitivity at rho_R")  # fmt: skip
+    netsim.add_argument("--routing", choices=("aodv", "olsr"), default="aodv",
+                        help="routing protocol (default aodv, hello 1 s)")  # fmt: skip
+    netsim.add_argument("--out", type=Path, default=None, metavar="DIR",
+                        help="write netsim.json, t_bs.png and bs_con.png here")  # fmt: skip
+    netsim.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    netsim.set_defaults(handler=netsim_command)
 
 
 # --------------------------------------------------------------------------- info
@@ -230,3 +255,101 @@ def replay_command(args: argparse.Namespace) -> int:
         connection.close()
     console.print(f"sent {stats.frames} frames, {stats.bytes} bytes in {stats.wall_s:.1f} s")
     return EXIT_OK
+
+
+# --------------------------------------------------------------------------- netsim
+def netsim_command(args: argparse.Namespace) -> int:
+    from gcs.netsim.ns3 import (
+        IMPORT_TIMES,
+        NetOptions,
+        NetsimUnavailable,
+        load_ns3,
+        run_network,
+    )
+    from gcs.netsim.scenario import scenario_from_recording
+
+    if args.seed < 1:
+        raise InputError(None, "--seed", f"an integer >= 1, got {args.seed}")
+    out = output_folder(args.out, "--out") if args.out is not None else None
+    scenario = scenario_from_recording(args.log)
+    options = NetOptions(seed=args.seed, propagation=args.propagation, routing=args.routing)
+    try:
+        load_ns3()
+    except NetsimUnavailable as missing:
+        print(missing, file=sys.stderr)
+        return EXIT_BAD_INPUT
+    progress = Console(stderr=True, highlight=False)
+    progress.print(
+        f"{scenario.name}: {scenario.fleet_size} UAVs, {len(scenario.base_stations)} base "
+        f"stations, {len(scenario.ground_users)} ground users, "
+        f"{scenario.times[-1] - scenario.times[0]:.0f} s in ns-3 ({args.routing}, "
+        f"{args.propagation}, seed {args.seed}) ..."
+    )
+    result = run_network(scenario, options)
+    files = []
+    if out is not None:
+        from gcs.netsim.figures import write_outputs
+
+        files = write_outputs(result, out)
+    data = result.to_json()
+    if args.json:
+        print(json.dumps(data, allow_nan=False))
+    console = Console(stderr=args.json, highlight=False)
+    console.print(netsim_table(result))
+    console.print(
+        f"all packets: {data['packets_received']}/{data['packets_sent']} delivered; wall "
+        f"time: ns-3 import {sum(IMPORT_TIMES.values()):.1f} s, build {result.build_s:.1f} s, "
+        f"run {result.run_s:.1f} s"
+    )
+    for path in files:
+        console.print(f"wrote {path}")
+    return EXIT_OK
+
+
+def netsim_table(result) -> Table:
+    """The per-UAV table of `gcs log netsim`, then the ground users' delivery, T_BS and hops.
+    T_dv: the slowest of the UAV's receptions of the leaders' requests, by the paper's chain
+    and by the ground station's relay ("lost k": k requests never reached it)."""
+    options = result.options
+    table = Table(
+        title=f"{result.scenario.name} in ns-3 ({options.routing}, {options.propagation}, "
+        f"seed {options.seed})",
+        caption="T_BS: to the base station; gap: longest without a delivery while flying; "
+        "T_dv: slowest request, paper chain / ground station",
+    )
+    for name in ("node", "deliv %", "T_BS ms", "p95 ms", "hops", "max", "gap s",
+                 "T_dv chain ms", "T_dv gcs ms"):  # fmt: skip
+        table.add_column(name, justify="left" if name == "node" else "right")
+
+    def worst(value: float | None, lost: int) -> str:
+        if not result.scenario.requests:
+            return "-"
+        return f"lost {lost}" if lost else _ms(value)
+
+    for row in result.per_uav():
+        table.add_row(
+            f"UAV {row['id']}",
+            *_delivery_cells(row),
+            "-" if row["longest_gap_s"] is None else f"{row['longest_gap_s']:.1f}",
+            worst(row["t_dv_paper_worst_s"], row["t_dv_paper_lost"]),
+            worst(row["t_dv_gcs_worst_s"], row["t_dv_gcs_lost"]),
+        )
+    for index in range(len(result.scenario.ground_users)):
+        row = result.source_summary("user", index + 1)
+        table.add_row(f"user {index + 1}", *_delivery_cells(row), "", "", "")
+    return table
+
+
+def _delivery_cells(row: dict) -> list[str]:
+    ratio = row["delivery_ratio"]
+    return [
+        "-" if ratio is None else f"{100 * ratio:.1f}",
+        _ms(row["t_bs_mean_s"]),
+        _ms(row["t_bs_p95_s"]),
+        "-" if row["hops_mean"] is None else f"{row['hops_mean']:.2f}",
+        "-" if row["hops_max"] is None else str(row["hops_max"]),
+    ]
+
+
+def _ms(value: float | None) -> str:
+    return "-" if value is None else f"{1000 * value:.1f}"

@@ -1,0 +1,172 @@
+"""`gcs.netsim.ns3`: scenarios flown in ns-3 (the `ns3` extra; importing it takes ~10 s).
+
+A line of 3 UAVs standing 80 m apart from A at (0, 0), radio range 100 m, 30 m up: UAV k is
+k hops from A, every packet takes exactly k hops, and a request from UAV 1 reaches UAV 3 by
+the paper's chain after two relays. Moving UAV 3 out of range for 20 s cuts its packets for
+20 s. The same scenario and seed give the same numbers twice in one process.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs.mission import load_mission
+from gcs.netsim.ns3 import MISSING_EXTRA, NetOptions, NetResult, run_network
+from gcs.netsim.scenario import NetScenario, SpeedRequest
+from gcs.planning import plan_mission
+from gcs.sim.fastsim import FastOptions, fly_fast
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[1]
+MISSION = REPO / "tests" / "missions" / "core.yaml"
+SECONDS = 60.0
+REQUEST_AT = 20.0
+
+
+def line(cut: tuple[float, float] | None = None) -> NetScenario:
+    """The 3-UAV line, 60 s; `cut`: UAV 3 stands 500 m off the line between those times."""
+    times = np.round(np.arange(0.0, SECONDS + 1e-9, 0.1), 6)
+    positions = np.zeros((len(times), 3, 3))
+    positions[:, :, 0] = 80.0 * np.arange(1, 4)
+    positions[:, :, 2] = 30.0
+    if cut is not None:
+        away = (times >= cut[0]) & (times < cut[1])
+        positions[away, 2, 1] = 500.0
+    return NetScenario(
+        name="line",
+        times=times,
+        uav_positions=positions,
+        base_stations=np.array([[0.0, 0.0]]),
+        ground_users=np.zeros((0, 2)),
+        radio_range=100.0,
+        altitude=30.0,
+        requests=(SpeedRequest(REQUEST_AT, 1),),
+    )
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    """The core mission flown in the fast mode, recorded."""
+    log = tmp_path_factory.mktemp("netsim") / "core.mcap"
+    fly_fast(plan_mission(load_mission(MISSION)), FastOptions(log=log))
+    return log
+
+
+@pytest.fixture(scope="module")
+def still() -> NetResult:
+    return run_network(line(), NetOptions(seed=1))
+
+
+def arrays(result: NetResult) -> list[np.ndarray]:
+    return [
+        result.sent_s,
+        result.received_s,
+        result.hops,
+        result.station,
+        result.paper_received_s,
+        result.paper_hops,
+        result.gcs_received_s,
+        result.gcs_hops,
+        result.uplink_received_s,
+    ]
+
+
+def test_every_uav_delivers_its_data_in_exactly_its_hops_to_a(still):
+    assert len(still.sent_s) == 3 * 60  # one 100-byte packet a second per UAV
+    assert (still.station == 0).all()
+    for uav in (1, 2, 3):
+        row = still.source_summary("uav", uav)
+        assert row["sent"] == 60
+        assert row["delivery_ratio"] >= 0.95
+        mine = (still.source_id == uav) & still.delivered
+        assert set(still.hops[mine].tolist()) == {uav}  # UAV k at 80 k m: k hops
+        assert row["t_bs_p95_s"] < 0.05 * uav
+    gaps = still.handover_gaps()
+    assert (gaps <= 2.5).all()
+
+
+def test_a_request_from_uav_1_reaches_uav_3_by_the_chain_after_two_relays(still):
+    (paper,) = still.t_dv("paper")
+    assert paper[0] == 0.0  # the leader
+    assert 0.0 < paper[1] < paper[2] < 1.0
+    assert still.paper_relays[0].tolist() == [0, 1, 2]
+    assert still.paper_hops[0].tolist() == [0, 1, 2]  # one radio hop per relay
+    # through the ground station: UAV 1 -> A (1 hop), then A -> UAV 2 (2), A -> UAV 3 (3)
+    (gcs,) = still.t_dv("gcs")
+    assert gcs[0] == 0.0 and (gcs[1:] > 0).all() and (gcs < 1.0).all()
+    assert still.uplink_hops.tolist() == [1]
+    assert still.gcs_hops[0].tolist() == [0, 2, 3]
+    rows = still.per_uav()
+    assert rows[2]["t_dv_paper_worst_s"] == pytest.approx(paper[2])
+
+
+def test_the_same_scenario_and_seed_give_the_same_numbers(still):
+    again = run_network(line(), NetOptions(seed=1))
+    for mine, theirs in zip(arrays(still), arrays(again), strict=True):
+        assert np.array_equal(mine, theirs, equal_nan=True)
+    assert again.to_json()["uavs"] == still.to_json()["uavs"]
+    other = run_network(line(), NetOptions(seed=2))
+    assert not np.array_equal(other.sent_s, still.sent_s)  # the phases follow the seed
+
+
+def test_a_uav_out_of_range_for_20_s_has_a_20_s_gap():
+    result = run_network(line(cut=(20.0, 40.0)), NetOptions(seed=1))
+    gaps = result.handover_gaps()
+    # 20 s, and AODV's route discovery once UAV 3 is back (its queued requests backed off)
+    assert 19.0 <= gaps[2] <= 25.0, gaps
+    assert (gaps[:2] <= 2.5).all(), gaps
+    mine = (result.source_id == 3) & result.delivered
+    received = result.received_s[mine]
+    assert not ((received > 20.5) & (received < 39.5)).any()
+    assert result.source_summary("uav", 3)["delivery_ratio"] == pytest.approx(40 / 60, abs=0.05)
+
+
+def test_the_log_distance_range_and_olsr_keep_the_line_at_1_2_3_hops():
+    for options in (NetOptions(propagation="logdistance"), NetOptions(routing="olsr")):
+        result = run_network(line(), options)
+        for uav in (1, 2, 3):
+            mine = (result.source_id == uav) & result.delivered
+            assert set(result.hops[mine].tolist()) == {uav}, options
+            assert mine.sum() >= 0.8 * 60, options
+
+
+def test_gcs_log_netsim_writes_its_json_and_figures(gcs_main, tmp_path, recording):
+    out = tmp_path / "netsim"
+    code, stdout, stderr = gcs_main("log", "netsim", recording, "--out", out, "--json")
+    assert code == 0, stderr
+    printed = json.loads(stdout)
+    written = json.loads((out / "netsim.json").read_text())
+    assert written["uavs"] == printed["uavs"] and len(written["uavs"]) == 4
+    assert written["scenario"]["name"] == "core" and written["options"]["routing"] == "aodv"
+    assert written["packets_sent"] > 4 * 60 and written["delivery_ratio"] > 0.9
+    (request,) = written["requests"]
+    assert request["leader"] == 2 and request["t_dv_paper_s"][1] == 0.0
+    assert (out / "t_bs.png").stat().st_size > 0 and (out / "bs_con.png").stat().st_size > 0
+    assert "UAV 4" in stderr and "Traceback" not in stderr
+
+
+def test_without_the_ns3_extra_the_command_says_so_on_one_line(recording):
+    """`ns` unimportable (the extra missing): one line, exit 2; importing gcs.netsim and
+    reading the recording never imported ns-3."""
+    code = (
+        "import sys\n"
+        "sys.modules['ns'] = None\n"
+        "import gcs.netsim, gcs.netsim.ns3\n"
+        "assert 'cppyy' not in sys.modules\n"
+        "from gcs.cli import main\n"
+        f"status = main(['log', 'netsim', {str(recording)!r}])\n"
+        "assert 'cppyy' not in sys.modules\n"
+        "sys.exit(status)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=REPO, timeout=120)  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert done.stdout == ""
+    assert done.stderr == MISSING_EXTRA + "\n"

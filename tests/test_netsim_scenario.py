@@ -25,6 +25,7 @@ from gcs.netsim.scenario import (
 )
 from gcs.planning import plan_mission
 from gcs.sim.fastsim import FastOptions, fly_fast
+from tests.test_log_cli import one_line_exit_2
 
 MISSION = Path(__file__).resolve().parent / "missions" / "core.yaml"
 
@@ -166,16 +167,6 @@ def test_options_are_checked_and_the_log_distance_threshold_falls_at_the_range()
 
 
 # --------------------------------------------------------------------------- the command
-def one_line_exit_2(result, *names: str) -> None:
-    code, out, err = result
-    assert code == 2, err
-    assert out == ""
-    assert err.count("\n") == 1, err
-    assert "Traceback" not in err
-    for name in names:
-        assert name in err
-
-
 def test_gcs_log_netsim_refuses_bad_input_on_one_line_before_ns3(gcs_main, tmp_path, flown):
     _, _, path = flown
     missing = tmp_path / "missing.mcap"

@@ -434,3 +434,36 @@ def test_a_leader_requests_speed_from_the_gcs_at_mission_time():
     bench.send(mavlink.MAVLink_command_ack_message(178, 0, 0, 1, 1, 1))
     bench.run(3.0)
     assert len([m for m in bench.sent if m.get_type() == "COMMAND_INT"]) == 2
+
+
+# ------------------------------------------------------------------ catching up after a stall
+@pytest.mark.slow  # the simulation binds its vehicle's UDP socket (never read here)
+def test_a_process_catching_up_hands_each_message_over_when_its_clock_reaches_it():
+    """A process stopped for a while reads everything that queued at once, then catches up
+    over several wake-ups: a message that arrived at simulated 1.0 s is handled when the
+    steps reach 1.0 s, not at the first wake-up (that would fly the setpoints of the end of
+    a stall seconds early)."""
+    from vehicles.sim import Arrival, SimConfig, Simulation, VehicleSpec
+
+    sim = Simulation(
+        SimConfig(
+            vehicles=(VehicleSpec(1, 0, (0.0, 0.0, 0.0)),),
+            autopilot=AutopilotConfig(boot_time_s=0.0),
+        )
+    )
+    try:
+        step_s = sim.config.dynamics.step_s
+        codec = make_codec(1)
+        packed = mavlink.MAVLink_command_long_message(
+            1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 1, Mode.GUIDED, 0, 0, 0, 0, 0
+        ).pack(GCS)
+        (message,) = codec.parse_buffer(bytearray(packed))
+        queued = [Arrival(Stamp(1.0, 1.0), 0, message)]
+        sim.advance(round(0.2 / step_s), queued)  # the first wake-up: up to 0.2 s
+        assert sim.autopilots[0].mode == Mode.STABILIZE
+        sim.advance(round(0.98 / step_s), [])
+        assert sim.autopilots[0].mode == Mode.STABILIZE
+        sim.advance(round(1.2 / step_s), [])
+        assert sim.autopilots[0].mode == Mode.GUIDED
+    finally:
+        sim.close()

@@ -6,8 +6,10 @@ control rate; at each wake-up the loop integrates as many steps as the wall cloc
 high speedup costs no more wake-ups than real time. Every datagram keeps its kernel arrival
 time and each message reaches its autopilot when the simulated clock reaches that time,
 interleaved with the steps: a process briefly starved of CPU replays its input in order instead
-of flying on stale setpoints. If the process falls more than ``max_lag_s`` (wall clock) behind,
-the simulated clock slips instead of racing to catch up, and every vehicle reports it.
+of flying on stale setpoints, over as many wake-ups as the catching up takes (a message waits for
+the wake-up whose steps reach its arrival). If the process falls more than ``max_lag_s`` (wall
+clock) behind, the simulated clock slips instead of racing to catch up, and every vehicle
+reports it.
 """
 
 from __future__ import annotations
@@ -62,12 +64,14 @@ class SimConfig:
     leader_sysid: int | None = None
     leader_requests: tuple[LeaderRequest, ...] = ()
     control_rate_hz: float = 50.0
-    max_lag_s: float = 1.0
+    max_lag_s: float = 5.0
     signing_key: bytes | None = None  # MAVLink 2 signing for every vehicle (see link.make_codec)
 
 
 @dataclass(frozen=True)
-class _Arrival:
+class Arrival:
+    """A message read from vehicle ``vehicle``'s socket, stamped with when it arrived."""
+
     stamp: Stamp
     vehicle: int
     message: object
@@ -126,6 +130,7 @@ class Simulation:
         self._wall0 = 0.0
         self._slip_unreported = 0.0
         self._slip_reported_wall = float("-inf")
+        self._waiting: list[Arrival] = []  # read, not yet due (the clock is catching up)
 
     def close(self) -> None:
         for link in self.links:
@@ -156,7 +161,7 @@ class Simulation:
             if due - self._steps > max_lag_steps:
                 self._slip(due - self._steps - max_lag_steps, now)
                 due = self._steps + max_lag_steps
-            self._advance(min(due, self._steps + max_steps_per_wake), self._receive())
+            self.advance(min(due, self._steps + max_steps_per_wake), self._receive())
             next_tick = (self._steps // self._steps_per_tick + 1) * tick_s
             wait = self._wall0 + next_tick / cfg.speedup - time.monotonic()
             if wait > _EPOLL_RESOLUTION_S:  # epoll rounds up to whole milliseconds
@@ -173,6 +178,10 @@ class Simulation:
         cfg = self.config
         seconds = steps * cfg.dynamics.step_s
         self._wall0 += seconds / cfg.speedup
+        self._waiting = [  # the messages still to come keep their place on the slipped clock
+            Arrival(Stamp(a.stamp.sim_s - seconds, a.stamp.wall_s), a.vehicle, a.message)
+            for a in self._waiting
+        ]
         self.stats.slipped_sim_s += seconds
         self._slip_unreported += seconds
         if now - self._slip_reported_wall < _SLIP_REPORT_INTERVAL_S:
@@ -184,12 +193,17 @@ class Simulation:
         self._slip_reported_wall = now
         self._slip_unreported = 0.0
 
-    def _advance(self, due_steps: int, arrivals: list[_Arrival]) -> None:
+    def advance(self, due_steps: int, arrivals: list[Arrival]) -> None:
         """Integrate up to ``due_steps``, running the autopilots at every control tick and
         handing each message to its autopilot when the simulated clock reaches its arrival
-        (so a process that was late to read its sockets still applies them in order)."""
+        (so a process that was late to read its sockets still applies them in order). A
+        message that arrived later than ``due_steps`` (the clock catches up over several
+        wake-ups) waits for the wake-up that reaches it: delivered now, a setpoint of the end
+        of a stall would pull its vehicle seconds ahead of the mission."""
         per_tick = self._steps_per_tick
         step_s = self.config.dynamics.step_s
+        arrivals = self._waiting + arrivals  # both in arrival order, the waiting ones earlier
+        self._waiting = []
         pending = 0
         while True:
             now_s = self.sim_time()
@@ -206,8 +220,12 @@ class Simulation:
             self._steps += chunk
             if self._steps % per_tick == 0:
                 self._tick(Stamp(self.sim_time(), time.monotonic()))
-        for arrival in arrivals[pending:]:  # arrived during the current step
-            self._deliver(arrival)
+        reached = self.sim_time() + step_s  # arrived during the current step: due now
+        for arrival in arrivals[pending:]:
+            if arrival.stamp.sim_s < reached:
+                self._deliver(arrival)
+            else:
+                self._waiting.append(arrival)
         for autopilot, link in zip(self.autopilots, self.links, strict=True):
             self._flush(autopilot, link)
 
@@ -224,17 +242,17 @@ class Simulation:
             autopilot.emit_due(due, snapshot, stamp)
             self._flush(autopilot, link)
 
-    def _receive(self) -> list[_Arrival]:
+    def _receive(self) -> list[Arrival]:
         """Every waiting message of every vehicle, stamped with its arrival, in arrival order."""
-        arrivals: list[_Arrival] = []
+        arrivals: list[Arrival] = []
         for key, _ in self._selector.select(0):
             k = key.data
             for message, arrival in self.links[k].receive():
-                arrivals.append(_Arrival(Stamp(self._sim_now(arrival), arrival), k, message))
+                arrivals.append(Arrival(Stamp(self._sim_now(arrival), arrival), k, message))
         arrivals.sort(key=lambda a: a.stamp.wall_s)
         return arrivals
 
-    def _deliver(self, arrival: _Arrival) -> None:
+    def _deliver(self, arrival: Arrival) -> None:
         autopilot = self.autopilots[arrival.vehicle]
         link = self.links[arrival.vehicle]
         try:

@@ -1196,13 +1196,13 @@ class GroundStation:
                     driver.land(now)
             if driver.phase in (Phase.LANDED, Phase.FAILED):
                 roster.active = None
-        threshold = getattr(self.mission, "relieve_below_pct", None)
+        threshold = self.mission.relieve_below_pct
         if threshold is None or roster.active is not None:
             return
         if not (self._holding() and self.on_station):
             return
         for index, driver in enumerate(self.drivers):
-            level = getattr(driver.telemetry, "battery_remaining_pct", None)
+            level = driver.telemetry.battery_remaining_pct
             if level is None or level >= threshold or index in self._battery_noted:
                 continue
             if roster.relieved[index]:

@@ -228,14 +228,23 @@ class Sim:
         return (self.battery_mah,) * count
 
 
+#: `radio.model`: the medium's per-hop latency, jitter and loss, or draws from a table
+#: measured in ns-3 (`medium.radio`, docs/calibration.md).
+RADIO_MODELS = ("simple", "calibrated")
+
+
 @dataclass(frozen=True)
 class Radio:
-    """Emulated radio medium of the sim backend (range is the mission's `radio_range`)."""
+    """Emulated radio medium of the sim backend (range is the mission's `radio_range`).
+    `model` "calibrated" draws each packet's delay and loss from `calibration` (absolute,
+    resolved from the mission file; None: the table the medium ships)."""
 
     enabled: bool = True
     hop_latency_ms: float = 2.0
     jitter_ms: float = 1.0
     loss: float = 0.0
+    model: str = "simple"
+    calibration: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -925,8 +934,13 @@ class _Parser:
         return self.positive(value, "sim.battery_mah", "mAh")
 
     def radio(self, value: Any) -> Radio:
-        m = self.mapping(value, "radio", ("enabled", "hop_latency_ms", "jitter_ms", "loss"))
+        m = self.mapping(
+            value,
+            "radio",
+            ("enabled", "hop_latency_ms", "jitter_ms", "loss", "model", "calibration"),
+        )
         d = Radio()
+        model = self.choice(m.get("model", d.model), "radio.model", RADIO_MODELS)
         return Radio(
             enabled=self.boolean(m.get("enabled", d.enabled), "radio.enabled"),
             hop_latency_ms=self.nonnegative(
@@ -936,7 +950,26 @@ class _Parser:
             loss=self.number(
                 m.get("loss", d.loss), "radio.loss", low=0.0, high=1.0, high_open=True
             ),
+            model=model,
+            calibration=self.calibration(m["calibration"], model) if "calibration" in m else None,
         )
+
+    def calibration(self, value: Any, model: str) -> Path:
+        """`radio.calibration`: a table of `gcs eval calibrate`, relative to the mission file,
+        read now (a bad one is refused here, not when the medium starts)."""
+        from medium.calibration import load_calibration
+
+        name = self.string(value, "radio.calibration", "a calibration file path")
+        if model != "calibrated":
+            raise self.fail("radio.calibration", "radio.model: calibrated with it")
+        path = (self.source.parent / name).resolve()
+        try:
+            load_calibration(path)
+        except ValueError as error:
+            raise self.fail(
+                "radio.calibration", f"a calibration table of gcs eval calibrate ({error})"
+            ) from None
+        return path
 
     def signing(self, value: Any) -> Signing:
         m = self.mapping(value, "signing", ("key_file",))

@@ -4,7 +4,10 @@
 UAV k (0-based) is system `sysid-base + k`; the medium listens for its ground station on UDP
 `base-port + k` and talks to the vehicle on `vehicle-ports[k]`. Reports (one JSON object per
 `--report-period` simulated seconds, the last one at exit) go as UDP datagrams to `--report
-udp:HOST:PORT`; `--trace FILE` writes one JSON line per datagram (tests, debugging). Bad input
+udp:HOST:PORT`; `--trace FILE` writes one JSON line per datagram (tests, debugging).
+`--model calibrated` draws each packet's delay and loss from the ns-3 table `--calibration
+FILE` (default: the one shipped, `medium/calibration_ns3.json`) instead of `--hop-latency-ms`,
+`--jitter-ms` and `--loss` (`medium.radio`), at the load its ground users offer. Bad input
 is one line on stderr and exit status 2; SIGINT/SIGTERM stop it (exit 0), and so does the
 end of the process that started it (it has nobody left to forward for).
 """
@@ -21,9 +24,10 @@ import socket
 import sys
 from collections.abc import Sequence
 
+from medium.calibration import DEFAULT_CALIBRATION, CalibrationTable, load_calibration
 from medium.ground_users import DEFAULT_PACKET_BYTES, DEFAULT_RATE_BPS, GroundUser
 from medium.medium import Medium, MediumConfig, MediumPortInUse, MediumUav
-from medium.radio import RadioConfig
+from medium.radio import MODELS, RadioConfig
 from vehicles.cli import InputError, _home, _integer, _Parser, _positive
 from vehicles.sim import DEFAULT_ORIGIN
 
@@ -75,6 +79,18 @@ def _ground_users(text: str) -> list[GroundUser]:
     return users
 
 
+def _calibration(model: str, path: str | None) -> CalibrationTable | None:
+    """The table of `--model calibrated` (`--calibration`, default the shipped one)."""
+    if model != "calibrated":
+        if path is not None:
+            raise InputError("--calibration: expected --model calibrated with it")
+        return None
+    try:
+        return load_calibration(path if path is not None else DEFAULT_CALIBRATION)
+    except ValueError as exc:
+        raise InputError(f"--calibration: expected a table of gcs eval calibrate ({exc})") from None
+
+
 def _report_address(text: str) -> tuple[str, int]:
     host, _, port = text.removeprefix("udp:").rpartition(":")
     if not host or not port.isdigit() or not 0 < int(port) < 65536:
@@ -97,6 +113,10 @@ def build_parser() -> argparse.ArgumentParser:
     add("--jitter-ms", type=_positive("--jitter-ms", True), default=1.0)
     add("--loss", type=_positive("--loss", True), default=0.0, help="per-hop loss in [0, 1)")
     add("--seed", type=_integer("--seed", 0, 2**63 - 1), default=0)
+    add("--model", choices=MODELS, default="simple",
+        help="simple: the per-hop latency, jitter and loss; calibrated: the ns-3 table")  # fmt: skip
+    add("--calibration", metavar="FILE",
+        help="the table of --model calibrated (default: medium/calibration_ns3.json)")  # fmt: skip
     add("--speedup", type=_positive("--speedup"), default=1.0)
     add("--home", type=_home, default=DEFAULT_ORIGIN, help="LAT,LON,ALT of local (0,0,0)")
     add("--ground-users", default="", help="'x,y[,rate_bps];...'")
@@ -136,6 +156,8 @@ def config_from_args(args: argparse.Namespace) -> MediumConfig:
             jitter_s=args.jitter_ms / 1000.0,
             loss=args.loss,
             seed=args.seed,
+            model=args.model,
+            calibration=_calibration(args.model, args.calibration),
         ),
         stations=tuple(stations),
         uavs=uavs,

@@ -109,6 +109,17 @@ def sim_state_position(
     return local[:2], velocity
 
 
+def offered_data_bps(
+    ground_users: tuple[GroundUser, ...], uav_data_bps: float | None, fleet_size: int
+) -> float:
+    """The data the medium's sources offer together (bit/s): every UAV's data (when the
+    medium sends it: the fast mode) and every ground user's. It picks the load level of the
+    calibrated radio model (`medium.calibration`), measured with every UAV of a line sending
+    data; the MAVLink traffic between the ground station and the UAVs is not counted."""
+    users = sum(float(user.rate_bps) for user in ground_users)
+    return users + (float(uav_data_bps) * fleet_size if uav_data_bps else 0.0)
+
+
 class MediumModel:
     """The medium's decisions without sockets: where the UAVs are, which paths exist, each
     packet's hops and fate, the data sources and the counters. The medium process and the fast
@@ -136,7 +147,9 @@ class MediumModel:
         self.position_horizon_s = position_horizon_s
         self.sample_period_s = sample_period_s
         self.stats = RadioStats(count, keep_packets=keep_packets)
-        self.channel = Channel(radio)
+        self.channel = Channel(
+            radio, offered_load_bps=offered_data_bps(ground_users, uav_data_bps, count)
+        )
         self.ground_users = GroundUsers(ground_users, packet_bytes)
         self.uav_data = CbrTraffic([uav_data_bps] * count, packet_bytes) if uav_data_bps else None
         self._topology: Topology | None = None  # None: the positions changed since

@@ -8,8 +8,17 @@ joins it to any base station; its hop count is the length of the shortest such c
 base station hears it directly). A ground node (a ground user) relays nothing: it reaches a
 base station directly or through the UAV it hears that has the shortest chain.
 
-Every packet crosses its hops one after the other: each hop takes `hop_latency_s` plus a
-uniform jitter in [-jitter_s, +jitter_s] (never negative) and is lost with probability `loss`.
+Two models of a packet's fate over its hops (`RadioConfig.model`):
+
+* "simple" (the default): every packet crosses its hops one after the other: each hop takes
+  `hop_latency_s` plus a uniform jitter in [-jitter_s, +jitter_s] (never negative) and is lost
+  with probability `loss`;
+* "calibrated": the delay and the loss of the whole path are drawn from a table measured in
+  ns-3 (`medium.calibration`, made by `gcs eval calibrate`), at the load level nearest the
+  offered load (`RadioConfig.offered_load_bps`, or the data sources of the medium that owns
+  the channel: `medium.medium.MediumModel`). `hop_latency_s`, `jitter_s` and `loss` are not
+  used.
+
 A `DelayLine` hands packets over in order per stream (a radio link layer keeps its queue in
 order, and MAVLink 2 signing refuses a timestamp older than the last one).
 """
@@ -26,6 +35,10 @@ from typing import Any
 
 import numpy as np
 
+from medium.calibration import CalibrationTable, LoadLevel
+
+#: The models of a packet's fate (module docstring).
+MODELS = ("simple", "calibrated")
 #: Distances equal to the range count as links (the planner's tolerance, 1e-6 m).
 DISTANCE_TOLERANCE = 1e-6
 _NO_RELAY = np.iinfo(int).max  # a ground node no connected UAV hears
@@ -33,13 +46,20 @@ _NO_RELAY = np.iinfo(int).max  # a ground node no connected UAV hears
 
 @dataclass(frozen=True)
 class RadioConfig:
-    """The radio: range (m, may be infinite), per-hop latency and jitter (s), per-hop loss."""
+    """The radio: range (m, may be infinite), per-hop latency and jitter (s), per-hop loss,
+    the channel's seed, and the model (module docstring). "calibrated" draws from
+    `calibration` (`medium.calibration.load_calibration`; the medium ships
+    `medium/calibration_ns3.json`) at `offered_load_bps` (bit/s of data of every sender together; None: what the medium
+    owning the channel offers, `medium.medium.MediumModel`)."""
 
     range_m: float
     hop_latency_s: float = 0.002
     jitter_s: float = 0.001
     loss: float = 0.0
     seed: int = 0
+    model: str = "simple"
+    calibration: CalibrationTable | None = None
+    offered_load_bps: float | None = None
 
     def __post_init__(self) -> None:
         if not self.range_m > 0:
@@ -50,6 +70,14 @@ class RadioConfig:
             raise ValueError("jitter_s must be finite and >= 0")
         if not 0 <= self.loss < 1:
             raise ValueError("loss must be in [0, 1)")
+        if self.model not in MODELS:
+            raise ValueError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
+        if self.offered_load_bps is not None and not (
+            math.isfinite(self.offered_load_bps) and self.offered_load_bps >= 0
+        ):
+            raise ValueError("offered_load_bps must be finite and >= 0")
+        if self.model == "calibrated" and self.calibration is None:
+            raise ValueError("the calibrated model needs its table (medium.calibration)")
 
 
 @dataclass(frozen=True, eq=False)
@@ -185,15 +213,27 @@ class Channel:
 
     The draws are numpy's (`Generator.random`, and `Generator.uniform` = low + (high - low) x
     a `random` draw) taken from one stream in the same order, a block at a time: a packet costs
-    a few float operations instead of a numpy call per packet."""
+    a few float operations instead of a numpy call per packet. The calibrated model takes two
+    draws per packet (loss, then delay: `medium.calibration`) from the same stream, at the
+    load level nearest `config.offered_load_bps`, else `offered_load_bps` (the data the
+    medium's sources offer, bit/s), else the table's lowest."""
 
     _BLOCK = 4096  # uniform draws fetched from the generator at once
 
-    def __init__(self, config: RadioConfig, stream: int = 0) -> None:
+    def __init__(
+        self, config: RadioConfig, stream: int = 0, offered_load_bps: float | None = None
+    ) -> None:
         self.config = config
         self._rng = np.random.default_rng([config.seed, stream])
         self._block: list[float] = []
         self._next = 0  # index in `_block` of the next draw
+        self.level: LoadLevel | None = None  # the calibrated model's load level
+        if config.model == "calibrated":
+            load = config.offered_load_bps
+            self.offered_load_bps = load if load is not None else offered_load_bps
+            self.level = config.calibration.level(self.offered_load_bps)
+        else:
+            self.offered_load_bps = offered_load_bps
 
     def _draws(self, count: int) -> list[float]:
         """The next `count` uniform draws in [0, 1) of the stream."""
@@ -208,6 +248,9 @@ class Channel:
 
     def transit(self, hops: int) -> float | None:
         """Delay of one packet over `hops` hops (> 0), or None if a hop lost it."""
+        if self.level is not None:
+            loss_draw, delay_draw = self._draws(2)
+            return self.level.delay(hops, loss_draw, delay_draw)
         cfg = self.config
         if cfg.loss > 0 and self._draws(1)[0] >= (1.0 - cfg.loss) ** hops:
             return None
@@ -228,6 +271,9 @@ class Channel:
         cfg = self.config
         if not len(hops):
             return np.zeros(0)
+        if self.level is not None:  # two draws per packet, as `transit` takes them
+            draws = np.array(self._draws(2 * len(hops))).reshape(-1, 2)
+            return self.level.delays(hops, draws[:, 0], draws[:, 1])
         most = int(hops.max())
         per_hop = np.full((len(hops), most), cfg.hop_latency_s)
         if cfg.jitter_s > 0:

@@ -152,16 +152,24 @@ def test_gcs_log_netsim_writes_its_json_and_figures(gcs_main, tmp_path, recordin
     assert "UAV 4" in stderr and "Traceback" not in stderr
 
 
-def test_without_the_ns3_extra_the_command_says_so_on_one_line(recording):
+@pytest.mark.parametrize("command", ["log netsim", "eval paper", "eval calibrate"])
+def test_without_the_ns3_extra_the_command_says_so_on_one_line(recording, tmp_path, command):
     """`ns` unimportable (the extra missing): one line, exit 2; importing gcs.netsim and
-    reading the recording never imported ns-3."""
+    reading the recording never imported ns-3; `gcs eval paper --network ns3` and `gcs eval
+    calibrate` say so before they fly or write anything."""
+    out = tmp_path / "out.json"
+    args = {
+        "log netsim": ["log", "netsim", str(recording)],
+        "eval paper": ["eval", "paper", "--network", "ns3", "--out", str(out)],
+        "eval calibrate": ["eval", "calibrate", "--quick", "--out", str(out)],
+    }[command]
     code = (
         "import sys\n"
         "sys.modules['ns'] = None\n"
         "import gcs.netsim, gcs.netsim.ns3\n"
         "assert 'cppyy' not in sys.modules\n"
         "from gcs.cli import main\n"
-        f"status = main(['log', 'netsim', {str(recording)!r}])\n"
+        f"status = main({args!r})\n"
         "assert 'cppyy' not in sys.modules\n"
         "sys.exit(status)\n"
     )
@@ -170,3 +178,45 @@ def test_without_the_ns3_extra_the_command_says_so_on_one_line(recording):
     assert done.returncode == 2, done.stderr
     assert done.stdout == ""
     assert done.stderr == MISSING_EXTRA + "\n"
+    assert not out.exists()
+
+
+def test_gcs_eval_paper_replays_every_flight_in_ns3_next_to_the_medium(gcs_main, tmp_path):
+    """The reduced paper evaluation (one fixed speed, one leader) with `--network ns3`: the
+    table gains an ns-3 column, results.json an "ns3" section per flight, DIR/ns3 the
+    network figures; every follower hears the leader's request by both relays."""
+    out = tmp_path / "eval"
+    code, stdout, stderr = gcs_main("eval", "paper", "--mission", MISSION, "--speeds", "8",
+                                    "--leaders", "2", "--network", "ns3", "--out", out,
+                                    "--json")  # fmt: skip
+    assert code == 0, stderr
+    assert json.loads(stdout)["ok"] is True
+    results = json.loads((out / "results.json").read_text())
+    network = results["ns3"]
+    assert network["options"]["routing"] == "aodv" and network["options"]["seed"] == 1
+    assert set(network["runs"]) == {"8 m/s", "leader UAV 2"}
+    medium = {run["label"]: run for run in results["runs"]}
+    for label, run in network["runs"].items():
+        data = run["uav_data"]
+        assert data["sent"] > 4 * 40 and data["ratio"] > 0.9, (label, data)
+        assert 0.1 < data["delay_mean_ms"] < 100 and data["max_hops"] >= 1
+        assert data["sent"] == data["received"] + data["dropped"]
+        # the same offered load (0.8 kbit/s a UAV): 100-byte packets every second in ns-3,
+        # 200-byte packets every 2 s in the medium, over the same flight (ns-3 from the
+        # first sample, the medium from each take-off)
+        assert data["sent"] >= 2 * medium[label]["uav_data"]["sent"] - 4
+    fixed = network["runs"]["8 m/s"]["reactions"]
+    assert fixed["chain"] == {"worst_s": None, "mean_s": None, "lost": 0}  # no leader
+    led = network["runs"]["leader UAV 2"]["reactions"]
+    for relay in ("chain", "gcs"):
+        assert led[relay]["lost"] == 0 and 0 < led[relay]["mean_s"] <= led[relay]["worst_s"] < 1
+    rows = {row["quantity"]: row for row in results["table"]}
+    assert rows["T_dv, leader UAV 2: worst / mean"]["ns3"].startswith("chain ")
+    assert "% delivered" in rows["connectivity (8 m/s)"]["ns3"]
+    assert (out / "table.md").read_text().startswith("| quantity | paper | ours | ns-3 | note |")
+    for name in ("fig10_reaction_time.png", "fig11_delay_to_bs.png", "fig12_packets_at_bs.png",
+                 "fig13_packets_at_bs_speeds.png", "fig14_reaction_time_leaders.png",
+                 "fig14_reaction_time_leaders_gcs.png", "fig15_ground_users_leaders.png",
+                 "fig16_ground_users_speeds.png"):  # fmt: skip
+        assert (out / "ns3" / name).read_bytes()[:4] == b"\x89PNG", name
+    assert "ns-3: import" in stderr and "Traceback" not in stderr

@@ -1,7 +1,9 @@
-"""`gcs eval paper [--out DIR]`: the paper's network evaluation in the fast mode (`gcs.sim.eval`).
+"""`gcs eval paper [--out DIR] [--network ns3]`: the paper's network evaluation in the fast mode
+(`gcs.sim.eval`), its flights optionally replayed in ns-3 as well (`gcs.netsim.paper`).
 
 Exit statuses (CONTRACTS.md): 0 every run completed with its fleet connected the whole
-mission, 1 otherwise (the figures and the table are written either way), 2 bad input.
+mission, 1 otherwise (the figures and the table are written either way), 2 bad input (or
+`--network ns3` without the ns3 extra).
 """
 
 from __future__ import annotations
@@ -15,7 +17,8 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from gcs.errors import InputError
+from gcs.cli.ns3_flags import add_ns3_options, ns3_loaded, ns3_options
+from gcs.errors import EXIT_BAD_INPUT, InputError
 
 # The command's modules (matplotlib, the fast simulator) are imported when it runs, not when
 # `gcs` starts: every other command would pay for them.
@@ -35,8 +38,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="the paper's network evaluation (figs. 8-16 and a table next to its values)",
         description="Fly the paper's scenario at fixed speeds (2, 5, 10 m/s) and with a "
         "leader at UAV 1, 4, 6, 9 asking for speed changes; UAVs and ground users both send "
-        "data. Writes fig08..fig16 PNGs, table.md and results.json to --out. Exit 0 every "
-        "run completed and stayed connected, 1 otherwise, 2 bad input.",
+        "data. Writes fig08..fig16 PNGs, table.md and results.json to --out. With --network "
+        "ns3 every flight is also replayed in ns-3 (802.11b, AODV; the ns3 extra): an ns-3 "
+        "column in the table, figs. 10-16 from ns-3 in DIR/ns3. Exit 0 every run completed "
+        "and stayed connected, 1 otherwise, 2 bad input or ns-3 not installed.",
     )
     paper.add_argument("--out", type=Path, default=Path("eval"), metavar="DIR",
                        help="output folder (default ./eval)")  # fmt: skip
@@ -46,8 +51,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="fixed formation speeds, m/s (default 2,5,10)")  # fmt: skip
     paper.add_argument("--leaders", default="1,4,6,9", metavar="N,...",
                        help="leader positions of the varying-speed runs (default 1,4,6,9)")  # fmt: skip
+    paper.add_argument("--network", choices=("medium", "ns3"), default="medium",
+                       help="medium: our radio medium only (default); ns3: also replay every "
+                       "flight in ns-3 (docs/netsim.md)")  # fmt: skip
+    add_ns3_options(paper)
     paper.add_argument("--json", action="store_true", help="print results as one JSON object")
     paper.set_defaults(handler=paper_command)
+    from gcs.cli import cmd_calibrate  # `gcs eval calibrate`: the live medium from ns-3
+
+    cmd_calibrate.register(commands)
 
 
 def _numbers(flag: str, text: str, kind, positive: bool = True) -> tuple:
@@ -72,6 +84,10 @@ def paper_command(args: argparse.Namespace) -> int:
     if not speeds and not leaders:
         raise InputError(None, "--speeds", "at least one speed or leader to fly")
     mission = load_mission(args.mission)  # bad file: exit 2 before anything flies
+    options = ns3_options(args) if args.network == "ns3" else None
+    if options is not None:
+        if not ns3_loaded():  # before anything flies: a missing extra is one line, exit 2
+            return EXIT_BAD_INPUT
     output_folder(args.out, "--out")
     plan = EvalPlan(mission=args.mission, speeds=speeds, leaders=leaders)
     console = Console(stderr=args.json, highlight=False)
@@ -79,15 +95,32 @@ def paper_command(args: argparse.Namespace) -> int:
     progress = Console(stderr=True, highlight=False)
     runs = run_all(plan, progress=lambda label: progress.print(f"flying {label} ..."))
     files = write_figures(runs, args.out, mission)
-    metrics, rows = write_results(runs, args.out, time.perf_counter() - began, plan)
+    network = None
+    if options is not None:
+        from gcs.netsim import paper as ns3_paper
+
+        replay_began = time.perf_counter()
+        replayed = ns3_paper.replay_in_ns3(
+            runs, mission, options, lambda label: progress.print(f"ns-3: {label} ...")
+        )
+        files += ns3_paper.write_figures(replayed, args.out / "ns3")
+        network = ns3_paper.summary(replayed, mission, time.perf_counter() - replay_began)
+    metrics, rows = write_results(runs, args.out, time.perf_counter() - began, plan, network)
     ok = all(m["completed"] and m["connected_fraction"] == 1.0 for m in metrics)
     if args.json:
         print(json.dumps({"ok": ok, "out": str(args.out), "runs": metrics}, allow_nan=False))
     table = Table(title=f"paper evaluation ({time.perf_counter() - began:.0f} s)")
-    for name in ("quantity", "paper", "ours"):
+    columns = ("quantity", "paper", "ours", "ns-3") if network else ("quantity", "paper", "ours")
+    for name in columns:
         table.add_column(name)
-    for quantity, paper, ours, _ in rows:
-        table.add_row(quantity, paper, ours)
+    for quantity, paper, ours, ns3, _ in rows:
+        table.add_row(quantity, paper, ours, *((ns3,) if network else ()))
     console.print(table)
+    if network is not None:
+        wall = network["wall_s"]
+        console.print(
+            f"ns-3: import {wall['import']:.1f} s, build {wall['build']:.1f} s, run "
+            f"{wall['run']:.1f} s for {len(runs)} flights"
+        )
     console.print(f"{len(files)} figures, table.md and results.json in {args.out}")
     return 0 if ok else 1

@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -19,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from rich.console import Console
 from rich.table import Table
 
+from gcs.cli.ns3_flags import add_ns3_options, ns3_loaded, ns3_options
 from gcs.cli.outputs import output_folder
 from gcs.errors import EXIT_BAD_INPUT, InputError
 
@@ -93,13 +93,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "figures. Exit 0, 2 bad input or ns-3 not installed (docs/netsim.md).",
     )
     netsim.add_argument("log", type=Path, metavar="LOG", help="MCAP file")
-    netsim.add_argument("--seed", type=int, default=1, metavar="N",
-                        help="ns-3 run number and data phases (default 1)")  # fmt: skip
-    netsim.add_argument("--propagation", choices=("range", "logdistance"), default="range",
-                        help="range: the paper's disk of rho_R (default); logdistance: "
-                        "log-distance loss, 802.11b sensitivity at rho_R")  # fmt: skip
-    netsim.add_argument("--routing", choices=("aodv", "olsr"), default="aodv",
-                        help="routing protocol (default aodv, hello 1 s)")  # fmt: skip
+    add_ns3_options(netsim)
     netsim.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="write netsim.json, t_bs.png and bs_con.png here")  # fmt: skip
     netsim.add_argument("--json", action="store_true", help="print one JSON object on stdout")
@@ -261,22 +255,14 @@ def replay_command(args: argparse.Namespace) -> int:
 def netsim_command(args: argparse.Namespace) -> int:
     from gcs.netsim.ns3 import (
         IMPORT_TIMES,
-        NetOptions,
-        NetsimUnavailable,
-        load_ns3,
         run_network,
     )
     from gcs.netsim.scenario import scenario_from_recording
 
-    if args.seed < 1:
-        raise InputError(None, "--seed", f"an integer >= 1, got {args.seed}")
+    options = ns3_options(args)
     out = output_folder(args.out, "--out") if args.out is not None else None
     scenario = scenario_from_recording(args.log)
-    options = NetOptions(seed=args.seed, propagation=args.propagation, routing=args.routing)
-    try:
-        load_ns3()
-    except NetsimUnavailable as missing:
-        print(missing, file=sys.stderr)
+    if not ns3_loaded():
         return EXIT_BAD_INPUT
     progress = Console(stderr=True, highlight=False)
     progress.print(

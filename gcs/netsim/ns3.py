@@ -526,12 +526,14 @@ def run_network(scenario: NetScenario, options: NetOptions = NetOptions()) -> Ne
 
     sent, kinds, ids = data_schedule(scenario, int(options.seed))
     node_of = np.where(kinds == "uav", ids - 1, uavs + stations + ids - 1).astype(np.int32)
-    net.ScheduleData(np.ascontiguousarray(sent + offset, dtype=np.float64), node_of, len(sent))
+    if len(sent):
+        net.ScheduleData(np.ascontiguousarray(sent + offset, dtype=np.float64), node_of, len(sent))
     request_times = np.array([r.t for r in scenario.requests], dtype=np.float64) + offset
     leaders = np.array([r.leader - 1 for r in scenario.requests], dtype=np.int32)
     # a request before the first sample is sent at the first sample
     request_times = np.ascontiguousarray(np.maximum(request_times, WARMUP_S))
-    net.ScheduleRequests(request_times, leaders, len(leaders))
+    if len(leaders):  # cppyy passes no buffer for an empty array
+        net.ScheduleRequests(request_times, leaders, len(leaders))
     end = float(scenario.times[-1]) + offset + DRAIN_S
     ns.Simulator.Stop(ns.Seconds(end))
     build_s = time.perf_counter() - began

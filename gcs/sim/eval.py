@@ -114,6 +114,26 @@ def run_all(plan: EvalPlan, progress=None) -> list[EvalRun]:
     return runs
 
 
+@dataclass(frozen=True, eq=False)
+class PacketSeries:
+    """One run's packets of one kind, in send order: the figures' input, whichever network
+    carried them (the fast mode's medium here, ns-3 in `gcs.netsim.paper`)."""
+
+    label: str
+    times: np.ndarray  # mission s each was sent
+    delays: np.ndarray  # s to a base station, NaN: dropped
+    hops: np.ndarray
+
+
+@dataclass(frozen=True)
+class Reactions:
+    """One leader run's T_dv per request and UAV (`reaction_times` rows), for figs. 10, 14."""
+
+    label: str
+    fleet_size: int
+    requests: list[dict]
+
+
 # --------------------------------------------------------------------------- metrics
 def _packets(run: FastRun, kind: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(send times, delays s (NaN: dropped), hops) of one kind of packet, in time order."""
@@ -121,6 +141,16 @@ def _packets(run: FastRun, kind: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
     mask = p["kind"] == kind
     order = np.argsort(p["time_s"][mask], kind="stable")
     return p["time_s"][mask][order], p["delay_s"][mask][order], p["hops"][mask][order]
+
+
+def packet_series(run: EvalRun, kind: int) -> PacketSeries:
+    return PacketSeries(run.label, *_packets(run.run, kind))
+
+
+def leader_reactions(run: EvalRun) -> Reactions:
+    """The leader's requests of `run` and each UAV's T_dv."""
+    requests = [r for r in reaction_times(run.run) if r["source"].startswith("leader:")]
+    return Reactions(run.label, run.run.run_json["fleet_size"], requests)
 
 
 def reaction_times(run: FastRun) -> list[dict]:
@@ -167,7 +197,8 @@ def airborne_min_distance(run: FastRun, above_m: float = 1.0) -> np.ndarray:
     return np.where(np.isfinite(smallest), smallest, np.nan)
 
 
-def _counts(received: np.ndarray) -> dict[str, Any]:
+def packet_counts(received: np.ndarray) -> dict[str, Any]:
+    """Sent, received, dropped and their ratio, of packets `received` (bool)."""
     return {
         "sent": int(len(received)),
         "received": int(received.sum()),
@@ -232,11 +263,11 @@ def run_metrics(run: EvalRun, mission: Mission) -> dict[str, Any]:
             "longest_gap_s": longest_gap_s(times, received, start, end),
         },
         "ground_users": {
-            **_counts(g_received),
+            **packet_counts(g_received),
             "delay_mean_ms": float(np.nanmean(g_delays) * 1000) if g_received.any() else None,
         },
         "ground_users_beyond_stations": {
-            **_counts(g_received[far]),
+            **packet_counts(g_received[far]),
             "users": [int(u) + 1 for u in needs_fleet],
         },
         "reaction_worst_s": worst,
@@ -280,23 +311,24 @@ def fig_min_distance(run: EvalRun, which: str, rho_c: float, rho_r: float) -> Fi
     return fig
 
 
-def fig_reactions(runs: list[EvalRun], title: str) -> Figure:
+def fig_reactions(runs: list[Reactions], title: str) -> Figure:
     """Figs. 10 and 14: each UAV's reaction time T_dv to each leader request."""
     fig, axes = _figure(10, 3.2 * len(runs) if len(runs) > 1 else 5, rows=len(runs))
     for ax, run in zip(axes[:, 0], runs, strict=True):
-        reactions = [r for r in reaction_times(run.run) if r["source"].startswith("leader:")]
-        size = run.run.run_json["fleet_size"]
+        reactions, size = run.requests, run.fleet_size
         colours = _colours(len(reactions))
         width = 0.8 / max(len(reactions), 1)
         for i, reaction in enumerate(reactions):
             uavs = np.arange(1, size + 1)
-            values = [reaction["t_dv_s"].get(int(u), np.nan) * 1000 for u in uavs]
+            values = [_ms_value(reaction["t_dv_s"].get(int(u))) for u in uavs]
+            speed = reaction.get("speed")
             ax.bar(
                 uavs + (i - (len(reactions) - 1) / 2) * width,
                 values,
                 width=width,
                 color=colours[i],
-                label=f"t={reaction['requested_s']:.0f} s -> {reaction['speed']:g} m/s",
+                label=f"t={reaction['requested_s']:.0f} s"
+                + (f" -> {speed:g} m/s" if speed is not None else ""),
             )
         ax.set_xticks(np.arange(1, size + 1))
         ax.set_ylabel("T_dv (ms)")
@@ -308,44 +340,51 @@ def fig_reactions(runs: list[EvalRun], title: str) -> Figure:
     return fig
 
 
-def fig_delay(run: EvalRun) -> Figure:
+def _ms_value(seconds: float | None) -> float:
+    """Milliseconds for a bar (NaN, no bar, for a UAV the request never reached)."""
+    return np.nan if seconds is None else 1000.0 * seconds
+
+
+def fig_delay(series: PacketSeries, network: str = "") -> Figure:
     """Fig. 11: delay of the UAVs' data packets to a base station (T_BS), and their hops."""
     fig, axes = _figure()
     ax = axes[0, 0]
-    times, delays, hops = _packets(run.run, UAV_DATA)
+    times, delays, hops = series.times, series.delays, series.hops
     ok = np.isfinite(delays)
     ax.scatter(times[ok], delays[ok] * 1000, s=2, alpha=0.3, label="each packet")
-    bins = np.arange(np.floor(times.min()), times.max() + 10, 10.0)
-    index = np.digitize(times[ok], bins)
-    centres = [(bins[i - 1] + 5) for i in np.unique(index)]
-    means = [delays[ok][index == i].mean() * 1000 for i in np.unique(index)]
-    ax.plot(centres, means, color="C1", lw=1.5, label="mean per 10 s")
-    twin = ax.twinx()
-    hop_means = [hops[ok][index == i].mean() for i in np.unique(index)]
-    twin.plot(centres, hop_means, color="C2", lw=1.0, ls="--", label="mean hops")
-    twin.set_ylabel("hops")
+    if ok.any():
+        bins = np.arange(np.floor(times.min()), times.max() + 10, 10.0)
+        index = np.digitize(times[ok], bins)
+        centres = [(bins[i - 1] + 5) for i in np.unique(index)]
+        means = [delays[ok][index == i].mean() * 1000 for i in np.unique(index)]
+        ax.plot(centres, means, color="C1", lw=1.5, label="mean per 10 s")
+        twin = ax.twinx()
+        hop_means = [hops[ok][index == i].mean() for i in np.unique(index)]
+        twin.plot(centres, hop_means, color="C2", lw=1.0, ls="--", label="mean hops")
+        twin.set_ylabel("hops")
+        twin.legend(loc="upper right", fontsize=8)
     ax.set_xlabel("mission time (s)")
     ax.set_ylabel("delay to a base station (ms)")
-    ax.set_title(f"Fig. 11: data packet delay to reach a base station, T_BS ({run.label})")
+    ax.set_title(
+        f"Fig. 11: data packet delay to reach a base station, T_BS ({series.label}){network}"
+    )
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", fontsize=8)
-    twin.legend(loc="upper right", fontsize=8)
     return fig
 
 
-def fig_packets(runs: list[EvalRun], kind: int, title: str, dropped: bool) -> Figure:
+def fig_packets(runs: list[PacketSeries], title: str, dropped: bool) -> Figure:
     """Figs. 12-13 (UAV data) and 15-16 (ground users): packets received at the base
     stations (and dropped) over time, cumulative."""
     fig, axes = _figure()
     ax = axes[0, 0]
     colours = _colours(len(runs))
     for colour, run in zip(colours, runs, strict=True):
-        times, delays, _ = _packets(run.run, kind)
-        got = np.isfinite(delays)
-        ax.step(times, np.cumsum(got), where="post", color=colour, lw=1.3,
+        got = np.isfinite(run.delays)
+        ax.step(run.times, np.cumsum(got), where="post", color=colour, lw=1.3,
                 label=f"{run.label} received")  # fmt: skip
         if dropped:
-            ax.step(times, np.cumsum(~got), where="post", color=colour, lw=1.0, ls=":",
+            ax.step(run.times, np.cumsum(~got), where="post", color=colour, lw=1.0, ls=":",
                     label=f"{run.label} dropped")  # fmt: skip
     ax.set_xlabel("mission time (s)")
     ax.set_ylabel("packets (cumulative)")
@@ -358,40 +397,66 @@ def fig_packets(runs: list[EvalRun], kind: int, title: str, dropped: bool) -> Fi
 def write_figures(runs: list[EvalRun], out: Path, mission: Mission) -> list[Path]:
     """The figures corresponding to the paper's figs. 8-16."""
     rho_c, rho_r = mission.safety_margin, mission.radio_range
-    fixed = [r for r in runs if r.leader is None]
-    leaders = [r for r in runs if r.leader is not None]
-    main = leaders[0] if leaders else fixed[-1]
+    main = main_run(runs)
     figures = {
         "fig08_min_uav_uav.png": fig_min_distance(main, "uav", rho_c, rho_r),
         "fig09_min_uav_obstacle.png": fig_min_distance(main, "obstacle", rho_c, rho_r),
-        "fig11_delay_to_bs.png": fig_delay(main),
+    }
+    figures |= network_figures(
+        runs, lambda run, kind: packet_series(run, kind), leader_reactions, network=""
+    )
+    return save_figures(figures, out)
+
+
+def main_run(runs: list):
+    """The run of figs. 8-12: the first leader run (UAV 1's, by default), else the fastest."""
+    leaders = [r for r in runs if r.leader is not None]
+    return leaders[0] if leaders else [r for r in runs if r.leader is None][-1]
+
+
+def network_figures(runs: list, series, reactions, network: str) -> dict[str, Figure]:
+    """Figs. 10-16, the network's: `series(run, kind)` -> `PacketSeries`, `reactions(run)` ->
+    `Reactions` (of a leader run); `network` is appended to the titles (" (ns-3)")."""
+    fixed = [r for r in runs if r.leader is None]
+    leaders = [r for r in runs if r.leader is not None]
+    main = main_run(runs)
+    figures = {
+        "fig11_delay_to_bs.png": fig_delay(series(main, UAV_DATA), network),
         "fig12_packets_at_bs.png": fig_packets(
-            [main],
-            UAV_DATA,
-            f"Fig. 12: UAV data packets received at the base stations ({main.label})",
+            [series(main, UAV_DATA)],
+            f"Fig. 12: UAV data packets received at the base stations ({main.label}){network}",
             dropped=True,
         ),  # fmt: skip
     }
     if leaders:
         figures["fig10_reaction_time.png"] = fig_reactions(
-            [main], f"Fig. 10: reaction time to speed change requests ({main.label})"
+            [reactions(main)],
+            f"Fig. 10: reaction time to speed change requests ({main.label}){network}",
         )
         figures["fig14_reaction_time_leaders.png"] = fig_reactions(
-            leaders, "Fig. 14: reaction time to speed change requests per leader position"
+            [reactions(r) for r in leaders],
+            f"Fig. 14: reaction time to speed change requests per leader position{network}",
         )
         figures["fig15_ground_users_leaders.png"] = fig_packets(
-            leaders, GROUND, "Fig. 15: ground-user packets received and dropped, per leader",
+            [series(r, GROUND) for r in leaders],
+            f"Fig. 15: ground-user packets received and dropped, per leader{network}",
             dropped=True,
         )  # fmt: skip
     if fixed:
         figures["fig13_packets_at_bs_speeds.png"] = fig_packets(
-            fixed, UAV_DATA, "Fig. 13: UAV data packets received at the base stations, fixed "
-            "speeds", dropped=False,
+            [series(r, UAV_DATA) for r in fixed],
+            f"Fig. 13: UAV data packets received at the base stations, fixed speeds{network}",
+            dropped=False,
         )  # fmt: skip
         figures["fig16_ground_users_speeds.png"] = fig_packets(
-            fixed, GROUND, "Fig. 16: ground-user packets received and dropped, fixed speeds",
+            [series(r, GROUND) for r in fixed],
+            f"Fig. 16: ground-user packets received and dropped, fixed speeds{network}",
             dropped=True,
         )  # fmt: skip
+    return figures
+
+
+def save_figures(figures: dict[str, Figure], out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for name, figure in sorted(figures.items()):
@@ -411,16 +476,22 @@ def _ms(seconds: float | None) -> str:
     return _fmt(None if seconds is None else seconds * 1000, 1)
 
 
-def comparison(metrics: list[dict]) -> list[tuple[str, str, str, str]]:
-    """Rows (quantity, paper, ours, note) of the table next to the paper (DESIGN 6)."""
+def comparison(
+    metrics: list[dict], network: dict[str, dict] | None = None
+) -> list[tuple[str, str, str, str, str]]:
+    """Rows (quantity, paper, ours, ns-3, note) of the table next to the paper (DESIGN 6).
+    `network`: run label -> `gcs.netsim.paper.net_metrics` of that flight replayed in ns-3
+    (the ns-3 cells are empty without it)."""
     by_label = {m["label"]: m for m in metrics}
-    rows: list[tuple[str, str, str, str]] = []
+    net = network or {}
+    rows: list[tuple[str, str, str, str, str]] = []
     parked = [m["min_uav_uav_parked_m"] for m in metrics if m["min_uav_uav_parked_m"]]
     rows.append(
         (
             "min UAV-UAV distance while parked",
             "about 15 m (dS_c)",
             _fmt(min(parked), 2, " m") if parked else "n/a",
+            "",
             "dS_c = 2√2 rho_c (14.14 m for rho_c = 5 m), less the tracking error",
         )
     )
@@ -430,6 +501,7 @@ def comparison(metrics: list[dict]) -> list[tuple[str, str, str, str]]:
             "> 0 (no collision)",
             _fmt(min(m["min_uav_uav_m"] for m in metrics), 2, " m"),
             "",
+            "",
         )
     )
     airborne = [m["max_airborne_uav_uav_m"] for m in metrics if m["max_airborne_uav_uav_m"]]
@@ -438,6 +510,7 @@ def comparison(metrics: list[dict]) -> list[tuple[str, str, str, str]]:
             "largest min distance between airborne UAVs",
             "below 200 m < rho_R",
             _fmt(max(airborne), 1, " m") if airborne else "n/a",
+            "",
             "in flight the line is spaced dS_r = rho_R - 2 rho_c apart",
         )
     )
@@ -446,6 +519,7 @@ def comparison(metrics: list[dict]) -> list[tuple[str, str, str, str]]:
             "min UAV-obstacle distance, all runs",
             "> 0 (no collision)",
             _fmt(min(m["min_uav_obstacle_m"] for m in metrics), 2, " m"),
+            "",
             "the plan passes corners at rho_c by design; below it: tracking error",
         )
     )
@@ -460,10 +534,13 @@ def comparison(metrics: list[dict]) -> list[tuple[str, str, str, str]]:
                 f"T_dv, leader UAV {m['leader']}: worst / mean",
                 paper,
                 f"{_ms(m['reaction_worst_s'])} / {_ms(m['reaction_mean_s'])} ms",
-                "leader -> base station -> ground station -> each UAV, 2 ± 1 ms per hop",
+                _net_reactions(net.get(m["label"])),
+                "leader -> base station -> ground station -> each UAV, 2 ± 1 ms per hop"
+                + ("; ns-3: the paper's UAV-to-UAV chain, then our relay" if net else ""),
             )
         )
     for m in metrics:
+        n = net.get(m["label"])
         rows.append(
             (
                 f"connectivity ({m['label']})",
@@ -471,6 +548,11 @@ def comparison(metrics: list[dict]) -> list[tuple[str, str, str, str]]:
                 f"{_fmt(100 * m['connected_fraction'], 1)} % of samples, longest gap "
                 f"{_fmt(m['uav_data']['longest_gap_s'], 2)} s, "
                 f"{m['uav_data']['dropped']} UAV packets dropped",
+                ""
+                if n is None
+                else f"{_fmt(_percent(n['uav_data']['ratio']), 1)} % delivered, longest gap "
+                f"{_fmt(n['uav_data']['longest_gap_s'], 1)} s, "
+                f"{n['uav_data']['dropped']} dropped",
                 "BS_con: UAV data received at the base stations",
             )
         )
@@ -479,6 +561,7 @@ def comparison(metrics: list[dict]) -> list[tuple[str, str, str, str]]:
         if m is None:
             continue
         g = m["ground_users"]
+        n = net.get(m["label"])
         paper_text = (
             f"{100 * paper['ratio']:.1f} % ({paper['received'] or '?'}/{paper['sent']}, "
             f"{paper['dropped']} dropped)"
@@ -489,6 +572,7 @@ def comparison(metrics: list[dict]) -> list[tuple[str, str, str, str]]:
                 paper_text,
                 f"{_fmt(100 * g['ratio'], 1)} % ({g['received']}/{g['sent']}, "
                 f"{g['dropped']} dropped)",
+                "" if n is None else _net_counts(n["ground_users"]),
                 "S_r-d; the paper's own counts do not add up (DESIGN 6): compare ratios",
             )
         )
@@ -500,6 +584,7 @@ def comparison(metrics: list[dict]) -> list[tuple[str, str, str, str]]:
                     "",
                     f"{_fmt(100 * far['ratio'], 1)} % ({far['received']}/{far['sent']}, "
                     f"users {', '.join(map(str, far['users']))})",
+                    "" if n is None else _net_counts(n["ground_users_beyond_stations"]),
                     "the others are within rho_R of A or B and never drop",
                 )
             )
@@ -510,50 +595,90 @@ def comparison(metrics: list[dict]) -> list[tuple[str, str, str, str]]:
                 "mission duration at 2 m/s",
                 "1800 s",
                 _fmt(m["duration_s"], 0, " s"),
+                "",
                 "first take-off to last landing; the paper's path and fleet spacing differ",
             )
         )
     delays = [m["uav_data"]["delay_mean_ms"] for m in metrics if m["uav_data"]["delay_mean_ms"]]
+    net_delays = [n["uav_data"]["delay_mean_ms"] for n in net.values()]
+    net_delays = [d for d in net_delays if d is not None]
     rows.append(
         (
             "T_BS, mean data delay to a base station",
             "hat-shaped over time, similar at every speed",
             f"{_fmt(min(delays), 2)}-{_fmt(max(delays), 2)} ms over the runs",
-            "hops x (2 ± 1 ms); no MAC contention or routing discovery",
+            f"{_fmt(min(net_delays), 2)}-{_fmt(max(net_delays), 2)} ms over the runs"
+            if net_delays
+            else "",
+            "hops x (2 ± 1 ms); no MAC contention or routing discovery"
+            + ("; ns-3: 802.11b MAC, AODV route discovery" if net else ""),
         )
     )
     return rows
 
 
+def _percent(ratio: float | None) -> float | None:
+    return None if ratio is None else 100.0 * ratio
+
+
+def _net_counts(counts: dict) -> str:
+    return (
+        f"{_fmt(_percent(counts['ratio']), 1)} % ({counts['received']}/{counts['sent']}, "
+        f"{counts['dropped']} dropped)"
+    )
+
+
+def _net_reactions(n: dict | None) -> str:
+    """The ns-3 cell of a T_dv row: worst / mean by the paper's chain, then our relay."""
+    if n is None:
+        return ""
+    cells = []
+    for relay, name in (("chain", "chain"), ("gcs", "gcs")):
+        r = n["reactions"][relay]
+        text = f"{name} {_ms(r['worst_s'])} / {_ms(r['mean_s'])} ms"
+        if r["lost"]:
+            text += f" ({r['lost']} never arrived)"
+        cells.append(text)
+    return "; ".join(cells)
+
+
 def table_markdown(rows) -> str:
-    lines = ["| quantity | paper | ours | note |", "|---|---|---|---|"]
-    lines += [f"| {q} | {p} | {o} | {n} |" for q, p, o, n in rows]
+    """The table; the ns-3 column only when some row has an ns-3 cell."""
+    with_network = any(row[3] for row in rows)
+    if with_network:
+        lines = ["| quantity | paper | ours | ns-3 | note |", "|---|---|---|---|---|"]
+        lines += [f"| {q} | {p} | {o} | {n} | {note} |" for q, p, o, n, note in rows]
+    else:
+        lines = ["| quantity | paper | ours | note |", "|---|---|---|---|"]
+        lines += [f"| {q} | {p} | {o} | {note} |" for q, p, o, _, note in rows]
     return "\n".join(lines) + "\n"
 
 
 def write_results(
-    runs: list[EvalRun], out: Path, wall_s: float, plan: EvalPlan
-) -> tuple[list[dict], list[tuple[str, str, str, str]]]:
-    """`table.md` and `results.json` in `out`; returns the per-run metrics and the rows."""
+    runs: list[EvalRun], out: Path, wall_s: float, plan: EvalPlan, network: dict | None = None
+) -> tuple[list[dict], list[tuple[str, str, str, str, str]]]:
+    """`table.md` and `results.json` in `out`; returns the per-run metrics and the rows.
+    `network`: the ns-3 replay (`gcs.netsim.paper.replay_in_ns3`'s summary: "options",
+    "wall_s" and "runs", label -> metrics), written as `results.json` "ns3" and as the table's
+    ns-3 column."""
     mission = load_mission(plan.mission)
     metrics = [run_metrics(run, mission) for run in runs]
-    rows = comparison(metrics)
+    rows = comparison(metrics, None if network is None else network["runs"])
+    columns = ("quantity", "paper", "ours", "ns3", "note")
     out.mkdir(parents=True, exist_ok=True)
     (out / "table.md").write_text(table_markdown(rows))
-    (out / "results.json").write_text(
-        json.dumps(
-            {
-                "mission": str(plan.mission),
-                "wall_s": wall_s,
-                "leader_requests": plan.leader_requests,
-                "runs": metrics,
-                "reactions": {run.label: reaction_times(run.run) for run in runs},
-                "table": [
-                    dict(zip(("quantity", "paper", "ours", "note"), row, strict=True))
-                    for row in rows
-                ],
-            },
-            indent=1,
-        )
-    )
+    results = {
+        "mission": str(plan.mission),
+        "wall_s": wall_s,
+        "leader_requests": plan.leader_requests,
+        "runs": metrics,
+        "reactions": {run.label: reaction_times(run.run) for run in runs},
+        "table": [
+            {k: v for k, v in zip(columns, row, strict=True) if k != "ns3" or network}
+            for row in rows
+        ],
+    }
+    if network is not None:
+        results["ns3"] = network
+    (out / "results.json").write_text(json.dumps(results, indent=1, allow_nan=False))
     return metrics, rows

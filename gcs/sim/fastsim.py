@@ -193,14 +193,24 @@ def mission_dynamics(mission) -> DynamicsConfig:
 
 
 def radio_config(mission) -> RadioConfig:
-    """The medium of `mission`: its radio range and `radio:` section, seeded by `sim.seed`."""
+    """The medium of `mission`: its radio range and `radio:` section, seeded by `sim.seed`.
+    With `radio.model: calibrated`, the table of `radio.calibration` (None: the shipped one);
+    the load level follows the medium's data sources (every UAV's data and every ground
+    user's: `medium.medium.offered_data_bps`)."""
+    from medium.calibration import DEFAULT_CALIBRATION, load_calibration
+
     radio = mission.radio
+    calibrated = radio.model == "calibrated"
     return RadioConfig(
         range_m=mission.radio_range,
         hop_latency_s=radio.hop_latency_ms / 1000.0,
         jitter_s=radio.jitter_ms / 1000.0,
         loss=radio.loss,
         seed=mission.sim.seed,
+        model=radio.model,
+        calibration=load_calibration(radio.calibration or DEFAULT_CALIBRATION)
+        if calibrated
+        else None,
     )
 
 

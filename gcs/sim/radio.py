@@ -1,7 +1,8 @@
 """The ground station's side of the emulated radio medium (sim backend, `radio.enabled`).
 
 `medium_setup(mission)` says what the medium needs from the mission (base stations A, B and
-the extra ones, radio range, the `radio:` section, ground users, seed); `MediumProcess` starts
+the extra ones, radio range, the `radio:` section with its model, ground users, seed);
+`MediumProcess` starts
 `python -m medium.cli` between the GCS and the vehicle processes, always stops it,
 and collects its periodic reports (JSON datagrams on a loopback UDP socket: never blocking,
 whoever reads them or not). The last report is the run JSON's `radio` object (CONTRACTS.md).
@@ -42,6 +43,8 @@ class MediumSetup:
     seed: int = 0
     ground_users: tuple[tuple[float, float, float], ...] = ()  # x, y, rate bit/s
     report_period_s: float = 0.5  # simulated
+    model: str = "simple"  # or "calibrated": draws from an ns-3 table (medium.radio)
+    calibration: Path | None = None  # the table of "calibrated" (None: the medium's own)
 
 
 def medium_setup(mission) -> MediumSetup | None:
@@ -58,7 +61,19 @@ def medium_setup(mission) -> MediumSetup | None:
         loss=radio.loss,
         seed=mission.sim.seed,
         ground_users=tuple((u.x, u.y, u.rate_bps) for u in mission.ground_users),
+        model=radio.model,
+        calibration=radio.calibration,
     )
+
+
+def model_args(setup: MediumSetup) -> list[str]:
+    """The medium's flags of the radio model: none for the simple one (its defaults)."""
+    if setup.model == "simple":
+        return []
+    args = ["--model", setup.model]
+    if setup.calibration is not None:
+        args += ["--calibration", str(setup.calibration)]
+    return args
 
 
 def run_json_radio(report: dict | None) -> dict | None:
@@ -113,6 +128,7 @@ class MediumProcess:
             f"--ground-users={_points(setup.ground_users)}",
             "--report", f"udp:{self.host}:{report_port}",
             "--report-period", f"{setup.report_period_s!r}",
+            *model_args(setup),
             *extra_args,
         ]  # fmt: skip
         self.command = cmd

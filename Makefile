@@ -17,8 +17,9 @@ $(STAMP): requirements.lock requirements-interop.lock pyproject.toml
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
-$(EXTRAS_STAMP): $(STAMP) requirements-ns3.lock
+$(EXTRAS_STAMP): $(STAMP) requirements-ns3.lock requirements-study.lock
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -r requirements-ns3.lock
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -r requirements-study.lock
 	touch $(EXTRAS_STAMP)
 
 demo: $(STAMP)

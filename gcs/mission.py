@@ -319,10 +319,17 @@ def load_mission(path: str | Path, *, check_clearance: bool = True) -> Mission:
     `check_clearance=False` skips only the test that A and B keep safety_margin from every
     obstacle (to suggest where they could go instead)."""
     path = Path(path)
+    text, data = read_yaml(path, "a mission file")
+    return parse_mission(data, path, text, check_clearance=check_clearance)
+
+
+def read_yaml(path: Path, what: str) -> tuple[str, Any]:
+    """The text of the YAML file `path` (`what` it should be, for a directory's refusal) and
+    its data, duplicate keys refused; `InputError` naming the file on anything unreadable."""
     try:
         text = path.read_text(encoding="utf-8")
     except IsADirectoryError:
-        raise InputError(path, "", "a mission file, got a directory") from None
+        raise InputError(path, "", f"{what}, got a directory") from None
     except UnicodeDecodeError:
         raise InputError(path, "", "a UTF-8 YAML text file") from None
     except OSError as exc:
@@ -336,14 +343,14 @@ def load_mission(path: str | Path, *, check_clearance: bool = True) -> Mission:
         at = f" at line {where.line + 1}, column {where.column + 1}" if where else ""
         problem = getattr(exc, "problem", None) or "syntax error"
         raise InputError(path, "", f"valid YAML ({problem}{at})") from None
-    return parse_mission(data, path, text, check_clearance=check_clearance)
+    return text, data
 
 
 def parse_mission(
     data: Any, source: Path, text: str = "", *, check_clearance: bool = True
 ) -> Mission:
     """Validate already-parsed YAML `data` read from `source` (for paths and messages)."""
-    return _Parser(Path(source), check_clearance).mission(data, text)
+    return MissionParser(Path(source), check_clearance).mission(data, text)
 
 
 # --- YAML loading --------------------------------------------------------------------------
@@ -418,8 +425,12 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
-class _Parser:
-    """Walks the YAML tree with key paths; every refusal raises `InputError`."""
+class MissionParser:
+    """Walks the YAML tree with key paths; every refusal raises `InputError`. Its primitive
+    readers (mapping, sequence, number, integer, choice, ...) serve the other YAML inputs too
+    (`gcs.study.studyfile`)."""
+
+    document = "mission"  # what the file is, in the refusal of a file that is not a mapping
 
     def __init__(self, source: Path, check_clearance: bool = True) -> None:
         self.source = source
@@ -435,7 +446,9 @@ class _Parser:
     ) -> dict:
         if not isinstance(value, dict):
             keys = ", ".join(allowed)
-            what = "the mission as a mapping of keys" if not path else f"a mapping ({keys})"
+            what = (
+                f"the {self.document} as a mapping of keys" if not path else f"a mapping ({keys})"
+            )
             raise self.fail(path, f"{what}, got {_describe(value)}")
         for key in value:
             if not isinstance(key, str) or key not in allowed:

@@ -31,6 +31,7 @@ from gcs.logs.logreader import read_recording
 from gcs.logs.recording import FlightRecorder
 from gcs.signing import FleetSigning
 from tests.attacker import codec, mutate, timestamp_now
+from tests.conftest import MISSIONS
 from tests.flying import MISSION, Flight, mission_file
 from tests.test_run_link import drain
 
@@ -73,6 +74,8 @@ def valid_values(tiny_log: Path, folder: Path) -> dict[str, str]:
         "out": str(folder / "out"),
         "to": "udpout:127.0.0.1:9",
         "autopilot": "ardupilot",
+        "study": str(MISSIONS / "study-tiny.yaml"),
+        "dir": str(folder / "study"),
     }
 
 

@@ -60,6 +60,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from gcs.cli import cmd_calibrate  # `gcs eval calibrate`: the live medium from ns-3
 
     cmd_calibrate.register(commands)
+    from gcs.cli import cmd_study  # `gcs eval study` and `gcs eval study-report`
+
+    cmd_study.register(commands)
 
 
 def _numbers(flag: str, text: str, kind, positive: bool = True) -> tuple:

@@ -44,7 +44,9 @@ def test_a_reduced_paper_evaluation_writes_figures_table_and_numbers(gcs_main, t
             run["ground_users"]["received"] + run["ground_users"]["dropped"]
         )
     led = results["runs"][1]
-    assert 0 < led["reaction_mean_s"] <= led["reaction_worst_s"] < 0.1
+    # relayed as soon as the ground station reads it (a few hops and the fast mode's 20 ms
+    # step), not at its next 10 Hz tick (82 ms when it waited)
+    assert 0 < led["reaction_mean_s"] <= led["reaction_worst_s"] < 0.05
     reactions = results["reactions"]["leader UAV 2"]
     assert all("2" not in r["t_dv_s"] for r in reactions)  # the leader is not its follower
     table = (out / "table.md").read_text()

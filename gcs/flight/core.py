@@ -662,6 +662,8 @@ class GroundStation:
         if stalled_since is not None:
             self._pending_stall = None
             self._resume_after_stall(stalled_since, latest)
+        if self.clock.anchored and self._pending_stall is None:
+            self._relay_leader_requests(self.clock.mission_time(latest), latest)
 
     def fleet_reports(self, now: float, problems: Iterable, radio_reports: Iterable[dict]) -> None:
         """What the fleet's processes reported: problems (`FleetProblem`: a vehicle process
@@ -898,16 +900,24 @@ class GroundStation:
             if not self._deferred(scheduled.speed, t, "schedule", now):
                 at = max(scheduled.at, self.speeds.earliest(t))
                 self._issue(scheduled.speed, t, "schedule", now, at=at)
-        for driver in self.drivers:
-            for request in driver.drain_leader_requests():
-                source = f"leader:{request.uav_id}"
-                if not self._deferred(request.speed, t, source, now):
-                    self._issue(request.speed, t, source, now)
+        self._relay_leader_requests(t, now)
         if self._station_xy is not None:
             if not self._planned_return_done:
                 self._planned_return_due(t, now)
             if self._hold is None and self.returned is None:
                 self._hold_due(t, now)
+
+    def _relay_leader_requests(self, t: float, now: float) -> None:
+        """Each leader's request becomes a fleet speed change (or is deferred) as soon as the
+        loop reads it, not at the next tick: the wait for a tick (up to 100 ms of mission time
+        at 10 Hz) would be most of every UAV's reaction time T_dv."""
+        if self.aborting:
+            return
+        for driver in self.drivers:
+            for request in driver.drain_leader_requests():
+                source = f"leader:{request.uav_id}"
+                if not self._deferred(request.speed, t, source, now):
+                    self._issue(request.speed, t, source, now)
 
     # ------------------------------------------------------------------ stations missions
     def _planned_return(self) -> tuple[float, str] | None:

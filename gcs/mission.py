@@ -397,8 +397,8 @@ _Loader.add_implicit_resolver(
 # --- validation ----------------------------------------------------------------------------
 
 
-def _describe(value: Any) -> str:
-    """How a refused value is shown: its YAML spelling and kind."""
+def describe_value(value: Any) -> str:
+    """How a refused value is shown: its YAML spelling and kind (the study file's refusals too)."""
     if isinstance(value, bool):
         return f"{str(value).lower()} (a boolean)"
     if value is None:
@@ -449,7 +449,7 @@ class MissionParser:
             what = (
                 f"the {self.document} as a mapping of keys" if not path else f"a mapping ({keys})"
             )
-            raise self.fail(path, f"{what}, got {_describe(value)}")
+            raise self.fail(path, f"{what}, got {describe_value(value)}")
         for key in value:
             if not isinstance(key, str) or key not in allowed:
                 raise self.fail(
@@ -462,7 +462,7 @@ class MissionParser:
 
     def sequence(self, value: Any, path: str, what: str) -> list:
         if not isinstance(value, list):
-            raise self.fail(path, f"a list of {what}, got {_describe(value)}")
+            raise self.fail(path, f"a list of {what}, got {describe_value(value)}")
         return value
 
     def number(
@@ -490,7 +490,7 @@ class MissionParser:
             return f"a finite number{suffix}"
 
         if not _is_number(value) or not math.isfinite(value):
-            raise self.fail(path, f"{want()}, got {_describe(value)}")
+            raise self.fail(path, f"{want()}, got {describe_value(value)}")
         value = float(value)
         if low is not None and (value < low or (low_open and value <= low)):
             raise self.fail(path, f"{want(value)}, got {_fmt(value, low)}")
@@ -507,29 +507,29 @@ class MissionParser:
     def integer(self, value: Any, path: str, low: int | None = None) -> int:
         want = "an integer" if low is None else f"an integer >= {low}"
         if not isinstance(value, int) or isinstance(value, bool):
-            raise self.fail(path, f"{want}, got {_describe(value)}")
+            raise self.fail(path, f"{want}, got {describe_value(value)}")
         if low is not None and value < low:
             raise self.fail(path, f"{want}, got {value}")
         return value
 
     def boolean(self, value: Any, path: str) -> bool:
         if not isinstance(value, bool):
-            raise self.fail(path, f"true or false, got {_describe(value)}")
+            raise self.fail(path, f"true or false, got {describe_value(value)}")
         return value
 
     def string(self, value: Any, path: str, what: str = "a non-empty string") -> str:
         if not isinstance(value, str) or not value.strip():
-            raise self.fail(path, f"{what}, got {_describe(value)}")
+            raise self.fail(path, f"{what}, got {describe_value(value)}")
         return value
 
     def choice(self, value: Any, path: str, options: tuple[str, ...]) -> str:
         if not isinstance(value, str) or value not in options:
-            raise self.fail(path, f"one of {', '.join(options)}, got {_describe(value)}")
+            raise self.fail(path, f"one of {', '.join(options)}, got {describe_value(value)}")
         return value
 
     def point(self, value: Any, path: str) -> np.ndarray:
         if not isinstance(value, list) or len(value) != 2:
-            raise self.fail(path, f"a point [x, y] in metres, got {_describe(value)}")
+            raise self.fail(path, f"a point [x, y] in metres, got {describe_value(value)}")
         return np.array([self.number(v, join_key(path, i), unit="m") for i, v in enumerate(value)])
 
     # sections
@@ -553,7 +553,7 @@ class MissionParser:
         )  # fmt: skip
         version = root["version"]
         if not isinstance(version, int) or isinstance(version, bool) or version != VERSION:
-            raise self.fail("version", f"{VERSION}, got {_describe(version)}")
+            raise self.fail("version", f"{VERSION}, got {describe_value(version)}")
         name = self.name(root.get("name"))
         origin = self.origin(root["origin"]) if "origin" in root else DEFAULT_ORIGIN
         start = self.pose(root["start"], "start")
@@ -872,7 +872,7 @@ class MissionParser:
         if size_value != "auto":
             if not isinstance(size_value, int) or isinstance(size_value, bool) or size_value < 1:
                 raise self.fail(
-                    "fleet.size", f"auto or an integer >= 1, got {_describe(size_value)}"
+                    "fleet.size", f"auto or an integer >= 1, got {describe_value(size_value)}"
                 )
             size = size_value
         backend = self.choice(m.get("backend", "sim"), "fleet.backend", BACKENDS)
@@ -942,7 +942,7 @@ class MissionParser:
         if not _is_number(value):
             raise self.fail(
                 "sim.battery_mah",
-                f"a number > 0 (mAh) or a list with one per UAV, got {_describe(value)}",
+                f"a number > 0 (mAh) or a list with one per UAV, got {describe_value(value)}",
             )
         return self.positive(value, "sim.battery_mah", "mAh")
 
@@ -1041,7 +1041,7 @@ class MissionParser:
         size_path = join_key(path, "size")
         size = m["size"]
         if not isinstance(size, list) or len(size) != 2:
-            raise self.fail(size_path, f"[width, height] in metres, got {_describe(size)}")
+            raise self.fail(size_path, f"[width, height] in metres, got {describe_value(size)}")
         size = np.array([self.positive(s, join_key(size_path, k), "m") for k, s in enumerate(size)])
         angle = math.radians(self.number(m.get("angle_deg", 0.0), join_key(path, "angle_deg")))
         half = 0.5 * size
@@ -1051,7 +1051,9 @@ class MissionParser:
 
     def polygon(self, value: Any, path: str) -> np.ndarray:
         if not isinstance(value, list) or len(value) < 3:
-            raise self.fail(path, f"a list of at least 3 points [x, y], got {_describe(value)}")
+            raise self.fail(
+                path, f"a list of at least 3 points [x, y], got {describe_value(value)}"
+            )
         ring = np.array([self.point(p, join_key(path, k)) for k, p in enumerate(value)])
         if np.allclose(ring[0], ring[-1]) and len(ring) > 3:
             ring = ring[:-1]  # an explicitly closed ring
@@ -1062,7 +1064,7 @@ class MissionParser:
 
     def segment(self, value: Any, path: str) -> np.ndarray:
         if not isinstance(value, list) or len(value) != 2:
-            raise self.fail(path, f"two points [[x, y], [x, y]], got {_describe(value)}")
+            raise self.fail(path, f"two points [[x, y], [x, y]], got {describe_value(value)}")
         ends = np.array([self.point(p, join_key(path, k)) for k, p in enumerate(value)])
         if np.linalg.norm(ends[1] - ends[0]) <= DISTANCE_TOLERANCE:
             raise self.fail(path, "two distinct end points")
@@ -1119,7 +1121,7 @@ class MissionParser:
         """[west, south, east, north] in degrees, west < east, south < north."""
         want = "[west, south, east, north] in degrees"
         if not isinstance(value, list) or len(value) != 4:
-            raise self.fail(path, f"{want}, got {_describe(value)}")
+            raise self.fail(path, f"{want}, got {describe_value(value)}")
         west, south, east, north = (
             self.number(v, join_key(path, i), low=-lim, high=lim, unit="degrees")
             for i, (v, lim) in enumerate(zip(value, (180.0, 90.0, 180.0, 90.0), strict=True))

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from gcs.mission import Mission
-from gcs.netsim.ns3 import IMPORT_TIMES, NetOptions, NetResult, load_ns3, run_network
+from gcs.netsim.ns3 import IMPORT_TIMES, NetOptions, NetResult, run_network
 from gcs.netsim.scenario import scenario_from_fast_run
 from gcs.sim.eval import (
     GROUND,
@@ -57,8 +57,8 @@ def replay_in_ns3(
     progress: Callable[[str], None] | None = None,
 ) -> list[NetEvalRun]:
     """Every flight of `runs` (of `mission`) in ns-3 with `options`; `progress(label)` before
-    each. `NetsimUnavailable` without the ns3 extra (raised before any run)."""
-    load_ns3()
+    each. `NetsimUnavailable` without the ns3 extra (`run_network` loads ns-3 before its first
+    run)."""
     replayed = []
     for run in runs:
         if progress is not None:

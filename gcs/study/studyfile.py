@@ -23,7 +23,14 @@ from typing import Any
 import yaml
 
 from gcs.errors import InputError, join_key
-from gcs.mission import MissionParser, _Loader, load_mission, parse_mission, read_yaml
+from gcs.mission import (
+    MissionParser,
+    _Loader,
+    describe_value,
+    load_mission,
+    parse_mission,
+    read_yaml,
+)
 from gcs.sim.eval import LEADER_REQUESTS
 from planner.types import METHODS
 
@@ -205,24 +212,6 @@ def load_study(path: str | Path) -> Study:
     return _StudyParser(path).study(data, text)
 
 
-def _describe(value: Any) -> str:
-    if isinstance(value, bool):
-        return f"{str(value).lower()} (a boolean)"
-    if value is None:
-        return "nothing (null)"
-    if isinstance(value, str):
-        return f"{value!r} (a string)"
-    if isinstance(value, dict):
-        return "a mapping"
-    if isinstance(value, list):
-        return f"a list of {len(value)}"
-    return f"{value:g}" if isinstance(value, float) else repr(value)
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
 class _StudyParser(MissionParser):
     """Walks the study file with key paths (the mission file's readers); every refusal raises
     `InputError`."""
@@ -242,10 +231,10 @@ class _StudyParser(MissionParser):
             ("version", "base", "axes"),
         )
         if root["version"] != VERSION or isinstance(root["version"], bool):
-            raise self.fail("version", f"{VERSION}, got {_describe(root['version'])}")
+            raise self.fail("version", f"{VERSION}, got {describe_value(root['version'])}")
         name = root.get("name", self.source.stem)
         if not isinstance(name, str) or not name.strip():
-            raise self.fail("name", f"a non-empty string, got {_describe(name)}")
+            raise self.fail("name", f"a non-empty string, got {describe_value(name)}")
         base = self.base(root["base"])
         base_mission = load_mission(base)  # its own refusals name the base mission file
         generator = self.map(root["map"]) if "map" in root else None
@@ -270,7 +259,7 @@ class _StudyParser(MissionParser):
 
     def base(self, value: Any) -> Path:
         if not isinstance(value, str) or not value.strip():
-            raise self.fail("base", f"a mission file path, got {_describe(value)}")
+            raise self.fail("base", f"a mission file path, got {describe_value(value)}")
         path = (self.source.parent / value).resolve()
         if not path.is_file():
             raise self.fail(
@@ -319,7 +308,7 @@ class _StudyParser(MissionParser):
                 raise self.fail("map.folder", "this required key with generator geojson")
             folder = m["folder"]
             if not isinstance(folder, str) or not folder.strip():
-                raise self.fail("map.folder", f"a folder path, got {_describe(folder)}")
+                raise self.fail("map.folder", f"a folder path, got {describe_value(folder)}")
             path = (self.source.parent / folder).resolve()
             files = tuple(sorted(p.name for p in path.glob("*.geojson"))) if path.is_dir() else ()
             if not files:
@@ -330,7 +319,7 @@ class _StudyParser(MissionParser):
     def size_range(self, value: Any) -> tuple[float, float]:
         key = "map.building_size_m"
         if not isinstance(value, list) or len(value) != 2:
-            raise self.fail(key, f"[smallest, largest] in metres, got {_describe(value)}")
+            raise self.fail(key, f"[smallest, largest] in metres, got {describe_value(value)}")
         low, high = (self.positive(v, join_key(key, i), "m") for i, v in enumerate(value))
         if low > high:
             raise self.fail(key, f"smallest <= largest, got [{low:g}, {high:g}]")
@@ -341,11 +330,15 @@ class _StudyParser(MissionParser):
             return LEADER_REQUESTS
         key = "leader_requests"
         if not isinstance(value, list) or not value:
-            raise self.fail(key, f"a non-empty list of [time s, speed m/s], got {_describe(value)}")
+            raise self.fail(
+                key, f"a non-empty list of [time s, speed m/s], got {describe_value(value)}"
+            )
         out = []
         for i, item in enumerate(value):
             if not isinstance(item, list) or len(item) != 2:
-                raise self.fail(join_key(key, i), f"[time s, speed m/s], got {_describe(item)}")
+                raise self.fail(
+                    join_key(key, i), f"[time s, speed m/s], got {describe_value(item)}"
+                )
             out.append(
                 (
                     self.positive(item[0], join_key(join_key(key, i), 0), "s"),
@@ -358,11 +351,14 @@ class _StudyParser(MissionParser):
         if value is None:
             return tuple(METRICS)
         if not isinstance(value, list) or not value:
-            raise self.fail("metrics", f"a non-empty list of metric names, got {_describe(value)}")
+            raise self.fail(
+                "metrics", f"a non-empty list of metric names, got {describe_value(value)}"
+            )
         for i, name in enumerate(value):
             if name not in METRICS:
                 raise self.fail(
-                    join_key("metrics", i), f"one of {', '.join(METRICS)}, got {_describe(name)}"
+                    join_key("metrics", i),
+                    f"one of {', '.join(METRICS)}, got {describe_value(name)}",
                 )
         if len(set(value)) != len(value):
             raise self.fail("metrics", "each metric once")
@@ -386,7 +382,7 @@ class _StudyParser(MissionParser):
             if name in needs and kind not in needs[name]:
                 raise self.fail(key, f"a map generator {' or '.join(needs[name])} (map.generator)")
             if not isinstance(values, list) or not values:
-                raise self.fail(key, f"a non-empty list of values, got {_describe(values)}")
+                raise self.fail(key, f"a non-empty list of values, got {describe_value(values)}")
             parsed = tuple(
                 self.axis_value(name, v, join_key(key, i), generator) for i, v in enumerate(values)
             )
@@ -406,7 +402,7 @@ class _StudyParser(MissionParser):
         if name == "map_file":
             if value not in generator.files:
                 raise self.fail(
-                    key, f"a .geojson file of {generator.folder}, got {_describe(value)}"
+                    key, f"a .geojson file of {generator.folder}, got {describe_value(value)}"
                 )
             return value
         if name in ("speed", "safety_margin", "radio_range"):
@@ -417,7 +413,7 @@ class _StudyParser(MissionParser):
             return "auto" if value == "auto" else self.integer(value, key, 1)
         if name == "radio":
             if not isinstance(value, dict) or not value:
-                raise self.fail(key, f"a mapping of radio keys, got {_describe(value)}")
+                raise self.fail(key, f"a mapping of radio keys, got {describe_value(value)}")
             return dict(value)
         if name == "network":
             return self.choice(value, key, NETWORKS)

@@ -88,10 +88,13 @@ class MissionPlan:
         return int(self.path_plan.fleet_size)
 
 
-def mission_problem(mission: Mission, method: str = "exact") -> PathProblem:
-    """The planner's problem for `mission`: A, B, angles, margins, obstacles, parking mode
-    and fixed fleet size (None with `fleet.size: auto`). For a stations mission, its first
-    leg (A -> the first point visited, with Delta_A): what its row refusals are about."""
+def mission_problem(
+    mission: Mission, method: str = "exact", gap_tolerance: float = 0.0
+) -> PathProblem:
+    """The planner's problem for `mission`: A, B, angles, margins, obstacles, parking mode,
+    fixed fleet size (None with `fleet.size: auto`) and the certification's relative gap
+    tolerance. For a stations mission, its first leg (A -> the first point visited, with
+    Delta_A): what its row refusals are about."""
     if mission.stations:
         return first_leg(route_problem(mission, method), mission.fleet.size or 1)
     return PathProblem(
@@ -105,6 +108,7 @@ def mission_problem(mission: Mission, method: str = "exact") -> PathProblem:
         parking=mission.parking,
         fleet_size=mission.fleet.size,
         method=method,
+        gap_tolerance=gap_tolerance,
     )
 
 
@@ -115,6 +119,7 @@ def plan_mission(
     connections: tuple[str, ...] | None = None,
     method: str = "exact",
     time_limit_s: float | None = None,
+    gap_tolerance: float = 0.0,
     on_progress: Callable[[SearchProgress, float], None] | None = None,
     clock: Callable[[], float] = time.perf_counter,
 ) -> MissionPlan:
@@ -125,7 +130,8 @@ def plan_mission(
     A mission without a valid path is returned with `valid == False` and the reason.
     The path search stops after `time_limit_s` seconds of `clock` (the plan is then the best
     valid path found so far, `path_plan.stopped`); `on_progress(progress, elapsed_s)` is
-    called as it goes.
+    called as it goes. `gap_tolerance` (relative) ends the certification of an A -> B path
+    once it is proven within that fraction of the shortest (`PathProblem.gap_tolerance`).
     """
     conns = mission.fleet.connections if connections is None else tuple(connections)
     conn_key = "fleet.connections" if connections is None else "--connect"
@@ -157,7 +163,7 @@ def plan_mission(
         mission.safety_margin,
         mission.parking,
     )
-    problem = mission_problem(mission, method)
+    problem = mission_problem(mission, method, gap_tolerance)
     check_rows(mission, problem, first_rows, fixed or lower)
     began = clock()
     path_plan = plan_path(problem, progress)
@@ -363,6 +369,7 @@ def plan_json(plan: MissionPlan) -> dict[str, Any]:
         "certified": bool(pp.certified),
         "lower_bound_m": _number(pp.lower_bound_m),
         "gap_m": _number(pp.length_m - pp.lower_bound_m) if plan.valid else None,
+        "gap_tolerance": _number(pp.gap_tolerance),
         "graph": pp.level or None,
         "stopped": bool(pp.stopped),
         "iterations": _integer(pp.iterations),

@@ -38,6 +38,7 @@ import shapely
 from planner.formation import ANGLE_TOLERANCE, DISTANCE_TOLERANCE, SQRT2, row_direction
 
 if TYPE_CHECKING:
+    from planner.obstacles import CoreGrid, Obstacles
     from planner.types import PathProblem
 
 START = 0  #: index of A in `Nodes`
@@ -52,6 +53,13 @@ _OCCLUDERS = 12
 _OCTANT_MIN = 2
 #: ... and at most this many within the candidate radius (the nearest ones).
 _OCTANT_MAX = 48
+#: Complete candidate sets over more targets than this go through each node's sector reach
+#: (`EdgeCache._visible_pairs`): its view cut into _SECTORS equal sectors, each seen only as
+#: far as the nearest obstacle that spans it whole.
+_SECTOR_REACH_TARGETS = 1500
+_SECTORS = 32
+#: ... for every member at once when a search has spread over this share of them.
+_SPREAD = 1.0 / 16.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -323,6 +331,90 @@ def edge_ok(problem: PathProblem, rows, starts: np.ndarray, ends: np.ndarray) ->
     return ok
 
 
+class Occlusion:
+    """What certainly hides what, for one problem's nodes; shared by its edge caches.
+
+    Shadows: per node (rows) and nearest obstacle (columns, `_OCCLUDERS` of them), the
+    reference angle, the obstacle's angular span relative to it, and its farthest vertex's
+    distance, computed on demand (unused slots never block). A segment from a node whose other
+    end lies strictly inside such a span and beyond the farthest vertex crosses the obstacle
+    (a connected obstacle whose convex hull does not hold the viewpoint meets every ray
+    strictly inside its angular span, within its farthest vertex). Core grids: where a
+    segment is certainly within rho_c of an obstacle (`CoreGrid`)."""
+
+    def __init__(self, nodes: Nodes, obstacles: Obstacles, safety_margin: float) -> None:
+        self.nodes = nodes
+        self.obstacles = obstacles
+        self.safety_margin = safety_margin
+        self.shadow = np.empty((len(nodes), _OCCLUDERS, 4))
+        self.shadow[...] = [0.0, np.inf, -np.inf, np.inf]
+        self.done = np.zeros(len(nodes), bool)
+        self._grid: CoreGrid | None = None
+        self._radius = math.inf  # the nearest obstacles are looked for within it
+        if len(obstacles) > _OCCLUDERS:
+            box = obstacles.vertices[0]
+            span = box.max(axis=0) - box.min(axis=0)
+            area = max(float(span[0] * span[1]), 1.0)
+            self._radius = math.sqrt(4.0 * _OCCLUDERS * area / (math.pi * len(obstacles)))
+
+    def in_shadow(self, node: np.ndarray, angle: np.ndarray, length: np.ndarray) -> np.ndarray:
+        """Whether the segment of `length` leaving `node` at `angle` ends in the shadow of
+        one of the node's nearest obstacles (`ensure` them first)."""
+        shadow = self.shadow[node]  # (k, _OCCLUDERS, 4): ref, low, high, far
+        ref, low, high, far = (shadow[..., c] for c in range(4))
+        rel = np.mod(angle[:, None] - ref + math.pi, 2.0 * math.pi) - math.pi
+        inside = (rel > low + ANGLE_TOLERANCE) & (rel < high - ANGLE_TOLERANCE)
+        return np.any(inside & (length[:, None] > far + DISTANCE_TOLERANCE), axis=1)
+
+    def grid(self, bounds: tuple[float, float, float, float]) -> CoreGrid:
+        """A core grid covering `bounds` (the last one built when it does)."""
+        grid = self._grid
+        if grid is None or not grid.covers(bounds):
+            margin = self.safety_margin - DISTANCE_TOLERANCE
+            self._grid = grid = self.obstacles.core_grid(bounds, margin)
+        return grid
+
+    def ensure(self, index: np.ndarray) -> None:
+        """Compute the shadows of the nodes `index` not done yet."""
+        index = index[~self.done[index]]
+        if len(index) == 0:
+            return
+        self.done[index] = True
+        obstacles = self.obstacles
+        pts = self.nodes.points[index]
+        where = shapely.points(pts)
+        if math.isinf(self._radius):
+            s = np.repeat(np.arange(len(index)), len(obstacles))
+            o = np.tile(np.arange(len(obstacles)), len(index))
+        else:
+            s, o = obstacles.tree.query(where, predicate="dwithin", distance=self._radius)
+        dist = shapely.distance(where[s], obstacles.geometries[o])
+        order = np.lexsort((dist, s))
+        s, o = s[order], o[order]
+        rank = np.arange(len(s)) - np.searchsorted(s, s, side="left")
+        keep = rank < _OCCLUDERS
+        s, o, rank = s[keep], o[keep], rank[keep]
+        usable = ~shapely.intersects(obstacles.hulls[o], where[s])
+        s, o, rank = s[usable], o[usable], rank[usable]
+        if len(s) == 0:
+            return
+        # One row per (pair, vertex of the pair's obstacle), reduced per pair (ragged).
+        flat, offsets = obstacles.vertices
+        sizes = offsets[o + 1] - offsets[o]
+        first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        pair = np.repeat(np.arange(len(s)), sizes)
+        vertex = offsets[o][pair] + np.arange(len(pair)) - first[pair]
+        verts = flat[vertex] - pts[s][pair]
+        centre = np.add.reduceat(verts, first, axis=0) / sizes[:, None]
+        ref_s = np.arctan2(centre[:, 1], centre[:, 0])
+        ang = np.arctan2(verts[:, 1], verts[:, 0]) - ref_s[pair]
+        ang = np.mod(ang + math.pi, 2.0 * math.pi) - math.pi
+        far = np.maximum.reduceat(np.hypot(verts[:, 0], verts[:, 1]), first)
+        self.shadow[index[s], rank] = np.column_stack(
+            [ref_s, np.minimum.reduceat(ang, first), np.maximum.reduceat(ang, first), far]
+        )
+
+
 class EdgeCache:
     """Obstacle-clear out-edges of graph nodes, computed on demand per spatial tile.
 
@@ -346,6 +438,7 @@ class EdgeCache:
         prune_collinear: bool,
         local_candidates: int | None = None,
         within: float | None = None,
+        occlusion: Occlusion | None = None,
     ) -> None:
         self.problem = problem
         self.nodes = nodes
@@ -379,23 +472,19 @@ class EdgeCache:
         self.side_at_dst = np.zeros(0)  # ... and at its destination
         self.radius: float | None = None
         self.goal_distance: np.ndarray | None = None  # the search heuristic, once computed
-        self._shadow: np.ndarray | None = None
-        self._shadow_done = np.zeros(0, bool)
+        self.occlusion = occlusion or Occlusion(nodes, problem.obstacles, problem.safety_margin)
         pts = nodes.points
+        self.uses_sector_reach = False
+        span = pts[self.targets].max(axis=0) - pts[self.targets].min(axis=0)
+        self._extent = 2.0 * float(np.hypot(*span)) + 1.0
         if local_candidates is not None and len(self.targets) > 4 * local_candidates:
-            span = pts[self.targets].max(axis=0) - pts[self.targets].min(axis=0)
             area = max(float(span[0] * span[1]), 1.0)
             self.radius = math.sqrt(local_candidates * area / (math.pi * len(self.targets)))
             self._target_tree = shapely.STRtree(shapely.points(pts[self.targets]))
-            self._extent = 2.0 * float(np.hypot(*span)) + 1.0
-        # Occluders: the obstacles nearest to a source node hide most targets (exact test).
-        obstacles = problem.obstacles
-        self._occluder_radius = math.inf
-        if len(obstacles) > _OCCLUDERS:
-            box = obstacles.vertices[0]
-            span = box.max(axis=0) - box.min(axis=0)
-            area = max(float(span[0] * span[1]), 1.0)
-            self._occluder_radius = math.sqrt(4.0 * _OCCLUDERS * area / (math.pi * len(obstacles)))
+        elif len(self.targets) > _SECTOR_REACH_TARGETS and len(problem.obstacles) > _OCCLUDERS:
+            self.uses_sector_reach = True
+            self._reach = np.full((count, _SECTORS), np.inf)
+            self._reach_done = np.zeros(count, bool)
         # Tiles: a square grid over the members, sized so a batch holds about _BATCH_PAIRS
         # candidate pairs.
         per_node = len(self.targets) if self.radius is None else 1.5 * local_candidates
@@ -427,6 +516,8 @@ class EdgeCache:
     def _candidate_pairs(self, sources: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distinct (source, target) pairs to test: every target for A and for every source
         when the radius is unlimited; otherwise the local pairs, plus B for every source."""
+        if self.uses_sector_reach:
+            return self._visible_pairs(sources)
         unlimited = sources if self.radius is None else sources[sources == START]
         src = [np.repeat(unlimited, len(self.targets))]
         dst = [np.tile(self.targets, len(unlimited))]
@@ -490,6 +581,70 @@ class EdgeCache:
         pick = rank < _OCTANT_MIN
         return np.concatenate([src, s_new[pick]]), np.concatenate([dst, t_new[pick]])
 
+    def _visible_pairs(self, sources: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Complete candidate sets without testing every pair in full: every target that is
+        not certainly hidden. Each node's view is cut into `_SECTORS` sectors; a sector that
+        one of the node's nearest obstacles spans whole is blocked beyond that obstacle's
+        farthest vertex (the shadow argument of `Occlusion`), and in the taut graph a sector
+        inside the node's corner cone (or its opposite) holds no tangent edge. A pair is kept
+        only if the target lies within the source's reach in its sector and, where the
+        target's reach is known, the source within the target's. Reaches are computed for the
+        sources, and for every member once a search has spread over `_SPREAD` of them."""
+        pts = self.nodes.points
+        if np.count_nonzero(self._reach_done[self.members]) >= _SPREAD * len(self.members):
+            self._sector_reach(self.members)
+        self._sector_reach(sources)
+        reach, known = self._reach, self._reach_done
+        src = np.repeat(sources, len(self.targets))
+        dst = np.tile(self.targets, len(sources))
+        d = pts[dst] - pts[src]
+        length = np.hypot(d[:, 0], d[:, 1])
+        sector = (np.arctan2(d[:, 1], d[:, 0]) + math.pi) * (_SECTORS / (2.0 * math.pi))
+        sector = sector.astype(np.int64) % _SECTORS
+        keep = (length <= reach[src, sector]) & (src != dst)
+        back = (sector[keep] + _SECTORS // 2) % _SECTORS
+        keep[keep] = ~known[dst[keep]] | (length[keep] <= reach[dst[keep], back])
+        return src[keep], dst[keep]
+
+    def _sector_reach(self, index: np.ndarray) -> None:
+        """Fill `_reach` (nodes, `_SECTORS`), how far a node can see into each sector (see
+        `_visible_pairs`), for the nodes `index` not done yet. Sector k spans the angles
+        [-pi + k w, -pi + (k + 1) w), w = 2 pi / `_SECTORS`."""
+        index = index[~self._reach_done[index]]
+        if len(index) == 0:
+            return
+        self._reach_done[index] = True
+        width = 2.0 * math.pi / _SECTORS
+        first = -math.pi + width * np.arange(_SECTORS)
+        for chunk in np.array_split(index, max(1, len(index) // 2000)):
+            self.occlusion.ensure(chunk)
+            shadow = self.occlusion.shadow[chunk]  # (k, _OCCLUDERS, 4): ref, low, high, far
+            ref, low, high, far = (shadow[..., c, None] for c in range(4))
+            rel = np.mod(first - ref + math.pi, 2.0 * math.pi) - math.pi  # (k, occ, sectors)
+            covers = (rel > low + ANGLE_TOLERANCE) & (rel + width < high - ANGLE_TOLERANCE)
+            reach = np.where(covers, far, np.inf).min(axis=1) + DISTANCE_TOLERANCE
+            if self.taut:
+                reach = np.where(self._inside_cone(chunk, first, width), 0.0, reach)
+            self._reach[chunk] = reach
+
+    def _inside_cone(self, index: np.ndarray, first: np.ndarray, width: float) -> np.ndarray:
+        """(k, sectors): sectors whose every direction is strictly inside node `index`'s
+        corner cone or its opposite (no edge there is tangent, see `tangent`). The cone's two
+        unit directions are 90 degrees apart or less, so a sector is inside when both its
+        bounding rays are, with the angle tolerance."""
+        cone = self.nodes.cone[index]  # (k, 2, 2)
+        out = np.zeros((len(index), len(first)), bool)
+        rays = [first + 1e-9, first + width - 1e-9]
+        rays = [np.stack([np.cos(a), np.sin(a)], axis=-1) for a in rays]  # (sectors, 2) each
+        for sign in (1.0, -1.0):
+            inside = np.ones_like(out)
+            for ray in rays:
+                along = sign * np.einsum("kcj,sj->kcs", cone, ray)
+                inside &= np.all(along > 2.0 * ANGLE_TOLERANCE, axis=1)
+            out |= inside
+        return out & self.nodes.prunable[index, None]
+        return out
+
     def _compute(self, sources: np.ndarray) -> None:
         nodes = self.nodes
         pts = nodes.points
@@ -513,6 +668,8 @@ class EdgeCache:
             # Before the clearance tests: if v->w is clear, so is its part v->x.
             idx = idx[~_collinear_shadowed(src[idx], dst[idx], d[idx], length[idx], self.radius)]
         idx = idx[~self._occluded(src[idx], dst[idx], d[idx], length[idx])]
+        if self.within is not None and len(idx):
+            idx = idx[~self._core_grid().blocks(pts[src[idx]], pts[dst[idx]])]
         segs = np.stack([pts[src[idx]], pts[dst[idx]]], axis=1)
         idx = idx[~self.problem.obstacles.segments_within(segs, rho - DISTANCE_TOLERANCE)]
         src, dst, d, length = src[idx], dst[idx], d[idx], length[idx]
@@ -520,78 +677,29 @@ class EdgeCache:
         src, dst, d, length = src[order], dst[order], d[order], length[order]
         self._append(sources, src, dst, d / length[:, None], length)
 
+    def _core_grid(self) -> CoreGrid:
+        """Where a segment is certainly too close to an obstacle, over the members."""
+        pts = self.nodes.points[self.members]
+        return self.occlusion.grid((*pts.min(axis=0), *pts.max(axis=0)))
+
     def _occluded(
         self, src: np.ndarray, dst: np.ndarray, d: np.ndarray, length: np.ndarray
     ) -> np.ndarray:
         """True for pairs certainly blocked: seen from either end, the other end lies
         strictly inside the angular shadow of one of that end's nearest obstacles, farther
-        than all of its vertices. (Such a segment crosses the obstacle: a connected obstacle
-        whose convex hull does not hold the viewpoint meets every ray strictly inside its
-        angular span, within its farthest vertex.) Cheap numpy culling before the exact
+        than all of its vertices (`Occlusion`). Cheap numpy culling before the exact
         clearance test."""
         if len(self.problem.obstacles) == 0 or len(src) == 0:
             return np.zeros(len(src), bool)
-        self._ensure_shadows(np.unique(src))
+        occlusion = self.occlusion
+        occlusion.ensure(np.unique(src))
         angle = np.arctan2(d[:, 1], d[:, 0])
-        blocked = self._in_shadow(src, angle, length)
+        blocked = occlusion.in_shadow(src, angle, length)
         # The far end's shadows only where they are known already (computing them for every
         # target of a tile costs more than the exact test they would spare).
-        rest = np.flatnonzero(~blocked & self._shadow_done[dst])
-        blocked[rest] = self._in_shadow(dst[rest], angle[rest] + math.pi, length[rest])
+        rest = np.flatnonzero(~blocked & occlusion.done[dst])
+        blocked[rest] = occlusion.in_shadow(dst[rest], angle[rest] + math.pi, length[rest])
         return blocked
-
-    def _in_shadow(self, node: np.ndarray, angle: np.ndarray, length: np.ndarray) -> np.ndarray:
-        shadow = self._shadow[node]  # (k, _OCCLUDERS, 4): ref, low, high, far
-        ref, low, high, far = (shadow[..., c] for c in range(4))
-        rel = np.mod(angle[:, None] - ref + math.pi, 2.0 * math.pi) - math.pi
-        inside = (rel > low + ANGLE_TOLERANCE) & (rel < high - ANGLE_TOLERANCE)
-        return np.any(inside & (length[:, None] > far + DISTANCE_TOLERANCE), axis=1)
-
-    def _ensure_shadows(self, index: np.ndarray) -> None:
-        """Per node (rows) and occluder (columns), cached: reference angle, angular span
-        relative to it, and farthest vertex distance; unused slots never block."""
-        count = len(self.nodes)
-        if self._shadow is None:
-            self._shadow = np.empty((count, _OCCLUDERS, 4))
-            self._shadow[...] = [0.0, np.inf, -np.inf, np.inf]  # empty slots never block
-            self._shadow_done = np.zeros(count, bool)
-        index = index[~self._shadow_done[index]]
-        if len(index) == 0:
-            return
-        self._shadow_done[index] = True
-        obstacles = self.problem.obstacles
-        pts = self.nodes.points[index]
-        where = shapely.points(pts)
-        if math.isinf(self._occluder_radius):
-            s = np.repeat(np.arange(len(index)), len(obstacles))
-            o = np.tile(np.arange(len(obstacles)), len(index))
-        else:
-            s, o = obstacles.tree.query(where, predicate="dwithin", distance=self._occluder_radius)
-        dist = shapely.distance(where[s], obstacles.geometries[o])
-        order = np.lexsort((dist, s))
-        s, o = s[order], o[order]
-        rank = np.arange(len(s)) - np.searchsorted(s, s, side="left")
-        keep = rank < _OCCLUDERS
-        s, o, rank = s[keep], o[keep], rank[keep]
-        usable = ~shapely.intersects(obstacles.hulls[o], where[s])
-        s, o, rank = s[usable], o[usable], rank[usable]
-        if len(s) == 0:
-            return
-        # One row per (pair, vertex of the pair's obstacle), reduced per pair (ragged).
-        flat, offsets = obstacles.vertices
-        sizes = offsets[o + 1] - offsets[o]
-        first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        pair = np.repeat(np.arange(len(s)), sizes)
-        vertex = offsets[o][pair] + np.arange(len(pair)) - first[pair]
-        verts = flat[vertex] - pts[s][pair]
-        centre = np.add.reduceat(verts, first, axis=0) / sizes[:, None]
-        ref_s = np.arctan2(centre[:, 1], centre[:, 0])
-        ang = np.arctan2(verts[:, 1], verts[:, 0]) - ref_s[pair]
-        ang = np.mod(ang + math.pi, 2.0 * math.pi) - math.pi
-        far = np.maximum.reduceat(np.hypot(verts[:, 0], verts[:, 1]), first)
-        self._shadow[index[s], rank] = np.column_stack(
-            [ref_s, np.minimum.reduceat(ang, first), np.maximum.reduceat(ang, first), far]
-        )
 
     def _append(self, sources, src, dst, unit, length) -> None:
         need = self.size + len(src)

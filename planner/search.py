@@ -49,6 +49,7 @@ from planner.graph import (
     START,
     EdgeCache,
     Nodes,
+    Occlusion,
     RowGeometry,
     graph_nodes,
     parking_angles_ok,
@@ -410,9 +411,9 @@ def _label_search(
         ok = np.ones(len(local), bool)
         segs = closed_array(closed)
         if len(segs):
-            new = shapely.linestrings(np.stack([pts[seg_start], pts[cache.dst[edge]]], axis=1))
-            old = shapely.linestrings(np.stack([pts[segs[:, 0]], pts[segs[:, 1]]], axis=1))
-            near = shapely.distance(new[:, None], old[None, :]) < limit
+            near = _segments_near(
+                pts[seg_start], pts[cache.dst[edge]], pts[segs[:, 0]], pts[segs[:, 1]], limit
+            )
             near[straight, 0] = False  # a grown segment is adjacent to the last closed one
             ok = ~near.any(axis=1)
         g = lab_g[label] + cache.length[edge]
@@ -423,6 +424,24 @@ def _label_search(
             pick = ok & ~straight
             push(edge[pick], g[pick], seg_start[pick], (start, v, closed))
     return None, "capped" if saturated else "exhausted"
+
+
+def _segments_near(
+    starts: np.ndarray, ends: np.ndarray, old_starts: np.ndarray, old_ends: np.ndarray, limit: float
+) -> np.ndarray:
+    """(k, m): whether new segment i comes closer than `limit` to old segment j. Bounding
+    boxes farther apart than `limit` settle most pairs; shapely measures the others."""
+    low, high = np.minimum(starts, ends), np.maximum(starts, ends)
+    old_low, old_high = np.minimum(old_starts, old_ends), np.maximum(old_starts, old_ends)
+    gap = np.maximum(old_low[None, :, :] - high[:, None, :], low[:, None, :] - old_high[None, :, :])
+    gap = np.maximum(gap, 0.0)
+    near = np.hypot(gap[..., 0], gap[..., 1]) < limit
+    i, j = np.nonzero(near)
+    if len(i):
+        new = shapely.linestrings(np.stack([starts[i], ends[i]], axis=1))
+        old = shapely.linestrings(np.stack([old_starts[j], old_ends[j]], axis=1))
+        near[i, j] = shapely.distance(new, old) < limit
+    return near
 
 
 def _node_search(
@@ -718,6 +737,7 @@ class _Planner:
 
         self.budget = _Budget(problem.max_expansions, poll=poll)
         self.nodes = graph_nodes(problem)
+        self.occlusion = Occlusion(self.nodes, problem.obstacles, problem.safety_margin)
         self._caches: dict[str, EdgeCache] = {}
         self._retired: list[EdgeCache] = []
 
@@ -731,6 +751,7 @@ class _Planner:
                 local_candidates={"taut": LOCAL_CANDIDATES, "full": LOCAL_CANDIDATES_FULL}.get(
                     level
                 ),
+                occlusion=self.occlusion,
             )
         return self._caches[level]
 
@@ -807,7 +828,12 @@ class _Planner:
         if key in self._caches:  # kept alive: row filters key their masks by id(cache)
             self._retired.append(self._caches[key])
         self._caches[key] = EdgeCache(
-            self.problem, self.nodes, taut=taut, prune_collinear=True, within=length
+            self.problem,
+            self.nodes,
+            taut=taut,
+            prune_collinear=True,
+            within=length,
+            occlusion=self.occlusion,
         )
         return self._caches[key]
 
@@ -835,15 +861,15 @@ class _Planner:
             if length <= _at_most(free):
                 taut.certified = True
                 return taut, "taut", None
-        if self.budget.spent:
+        if self.budget.spent or self._within_tolerance(length, taut.lower_bound):
             return taut, "taut", None
         full_cache = self.certify_cache(length)
         if full_cache is None:
             return taut, "taut", None
         self.budget.floor = 0.0
-        full = _exact_level(
-            self.problem, full_cache, rows, self.budget, length - DISTANCE_TOLERANCE
-        )
+        # Only a path shorter by more than the gap tolerance would matter.
+        sought = length * (1.0 - self.problem.gap_tolerance) - DISTANCE_TOLERANCE
+        full = _exact_level(self.problem, full_cache, rows, self.budget, sought)
         free = float(goal_distance(full_cache, self.budget)[START])
         floor = max(taut.lower_bound, min(free, length), min(self.budget.floor, length))
         if full.path is not None:
@@ -852,9 +878,19 @@ class _Planner:
             full.lower_bound = found if full.certified else min(floor, found)
             return full, "full", None
         exhaustive = full.status in ("bound", "exhausted", "repair")
-        taut.certified = exhaustive or length <= _at_most(free)
-        taut.lower_bound = length if taut.certified else floor
+        taut.certified = length <= _at_most(free) or (
+            exhaustive and self.problem.gap_tolerance == 0.0
+        )
+        if taut.certified:
+            taut.lower_bound = length
+        else:
+            taut.lower_bound = max(floor, min(sought, length)) if exhaustive else floor
         return taut, "taut", None
+
+    def _within_tolerance(self, length: float, lower_bound: float) -> bool:
+        """Whether `length` is proven within the problem's gap tolerance of the shortest."""
+        tolerance = self.problem.gap_tolerance
+        return tolerance > 0.0 and length - lower_bound <= tolerance * length
 
     def _why(self, result: _LevelResult, rows: _RowFilter, level: str) -> str:
         if result.status == "cap" or self.budget.spent:
@@ -954,6 +990,7 @@ def plan_path(
                 edge_count=sum(c.size for c in planner.all_caches),
                 lower_bound_m=length if result.certified else min(result.lower_bound, length),
                 stopped=planner.budget.stopped,
+                gap_tolerance=problem.gap_tolerance,
             )
         size = need
     return _invalid(

@@ -23,6 +23,10 @@ class PathProblem:
     from A->B), rho_c, rho_R, obstacles, parking mode ("segment" or the paper's "ray"), fleet
     size (None = the minimum of eq. 28, grown with the path), method and caps.
 
+    `gap_tolerance` (relative, >= 0) ends the certification once the path is proven at most
+    that fraction longer than the shortest valid path (a proven lower bound within it); 0
+    certifies exactly.
+
     A leg of a route (`planner.route`) sets `start_tail`, the polyline flown before it from
     its start back to A and along Delta_A, which replaces the start row (theta_A must then be
     the direction of its first piece), and `open_goal` (no row beyond B, no arrival angle)."""
@@ -39,6 +43,7 @@ class PathProblem:
     method: str = "exact"
     max_expansions: int = 2_000_000
     max_penalty_iterations: int = 50
+    gap_tolerance: float = 0.0
     start_tail: np.ndarray | None = None
     open_goal: bool = False
 
@@ -54,6 +59,8 @@ class PathProblem:
             raise ValueError(f"parking must be 'segment' or 'ray', not {self.parking!r}")
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, not {self.method!r}")
+        if not 0.0 <= self.gap_tolerance < 1.0:
+            raise ValueError(f"gap_tolerance must be in [0, 1), not {self.gap_tolerance}")
         if self.fleet_size is not None and self.fleet_size < 1:
             raise ValueError(f"fleet_size must be >= 1, not {self.fleet_size}")
 
@@ -96,7 +103,8 @@ class PathPlan:
     off the queues; `fleet_rounds` the fleet sizes tried. `lower_bound_m` is a proven lower
     bound on the shortest valid path (equal to `length_m` when certified; at least the
     straight line A-B); `stopped` says the caller's progress callback stopped the search (the
-    path is then the best found so far)."""
+    path is then the best found so far); `gap_tolerance` is the problem's (a path proven
+    within it of the shortest ends the certification, not certified)."""
 
     valid: bool
     reason: str | None
@@ -118,3 +126,4 @@ class PathPlan:
     edge_count: int = 0
     lower_bound_m: float = math.nan
     stopped: bool = False
+    gap_tolerance: float = 0.0

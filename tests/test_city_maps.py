@@ -60,6 +60,21 @@ def test_time_limit_must_be_a_positive_number(value, gcs_main):
     assert "--time-limit" in result.stderr and "positive number of seconds" in result.stderr
 
 
+@pytest.mark.parametrize("value", ["-0.5", "100", "tight", "nan"])
+def test_gap_must_be_a_percentage(value, gcs_main):
+    result = gcs_main("mission", "check", HELSINKI, "--gap", value)
+    assert result.returncode == 2
+    assert "--gap" in result.stderr and "percentage from 0 to below 100" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_the_plan_says_which_gap_tolerance_it_was_given(helsinki, gcs_main):
+    assert plan_json(plan_mission(helsinki))["gap_tolerance"] == 0.0
+    result = gcs_main("mission", "check", HELSINKI, "--json", "--gap", "0.5")
+    assert result.returncode == 0
+    assert json.loads(result.stdout)["gap_tolerance"] == 0.005
+
+
 MESSY = {
     "type": "FeatureCollection",
     "features": [

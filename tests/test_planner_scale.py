@@ -9,10 +9,12 @@ import math
 import networkx as nx
 import numpy as np
 import pytest
+import shapely
 
+import planner.graph as graph
 import planner.search as search
 from planner.graph import GOAL, START, EdgeCache, graph_nodes
-from planner.obstacles import Obstacles
+from planner.obstacles import Obstacles, _cell_centres_inside
 from planner.scenarios import city_grid, random_buildings, scenario_problem
 from planner.search import SearchProgress, goal_distance, plan_path
 from planner.validity import check_path
@@ -58,6 +60,35 @@ def test_certified_where_complete_candidates_agree():
         search.LOCAL_CANDIDATES, search.LOCAL_CANDIDATES_FULL = old
     assert complete.valid
     assert plan.length_m == pytest.approx(complete.length_m, abs=1e-6)
+
+
+def _all_edges(cache: EdgeCache) -> set[tuple[int, int]]:
+    for v in cache.members:
+        cache.edges(int(v))
+    return set(zip(cache.src[: cache.size].tolist(), cache.dst[: cache.size].tolist(), strict=True))
+
+
+@pytest.mark.parametrize("taut", [True, False])
+@pytest.mark.parametrize(
+    "world",
+    [random_buildings(60, seed=4, size=600.0), city_grid(6, 5, block=40.0, street=16.0)],
+    ids=["random", "grid"],
+)
+def test_sector_reach_finds_every_edge_that_testing_every_pair_finds(monkeypatch, world, taut):
+    """Complete candidate sets found through each node's sector reach (what a sector's
+    nearest spanning obstacle hides, and the corner cone's sectors in the taut graph) give
+    exactly the edges of testing every pair."""
+    prob = scenario_problem(world)
+    nodes = graph_nodes(prob)
+    straight = float(np.hypot(*(prob.goal - prob.start)))
+    made = {}
+    for threshold in (10**9, 0):
+        monkeypatch.setattr(graph, "_SECTOR_REACH_TARGETS", threshold)
+        cache = EdgeCache(prob, nodes, taut=taut, prune_collinear=True, within=1.3 * straight)
+        assert cache.uses_sector_reach == (threshold == 0)
+        made[threshold] = _all_edges(cache)
+    assert len(made[0]) > 100
+    assert made[0] == made[10**9]
 
 
 @pytest.fixture(scope="module")
@@ -143,3 +174,48 @@ def test_vertices_are_stored_flat_whatever_the_largest_polygon():
     prob = problem([300.0, 300.0], [700.0, 700.0], obstacles)
     plan = plan_path(prob)
     assert plan.valid and check_path(plan.path, prob, plan.rows).ok
+
+
+def _donut_and_blocks() -> tuple[Obstacles, shapely.Polygon]:
+    """A courtyard building (a polygon with a hole), blocks, a wall and a point-like wall."""
+    outer = square(0.0, 0.0, 120.0)
+    court = shapely.Polygon(outer, [square(30.0, 30.0, 60.0)[::-1]])
+    blocks = [square(200.0 + 45.0 * k, 20.0 + 13.0 * k, 25.0) for k in range(5)]
+    return Obstacles(
+        polygons=(*blocks,),
+        walls=np.array([[[-60.0, 200.0], [150.0, 260.0]], [[300.0, 300.0], [300.0, 300.0]]]),
+    ), court
+
+
+def test_a_scanline_fill_finds_the_cell_centres_inside_polygons_with_holes():
+    obstacles, court = _donut_and_blocks()
+    area = shapely.union_all([court, *shapely.buffer(obstacles.geometries, 3.0, quad_segs=4)])
+    origin, cell, shape = np.array([-80.0, -40.0]), 1.7, (300, 220)
+    xs = origin[0] + cell * (np.arange(shape[0]) + 0.5)
+    ys = origin[1] + cell * (np.arange(shape[1]) + 0.5)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    expected = shapely.contains_xy(area, gx.ravel(), gy.ravel()).reshape(shape)
+    found = _cell_centres_inside(area, origin, cell, shape)
+    assert (
+        expected.sum() > 1000
+        and not expected[(xs > 35) & (xs < 85)][:, (ys > 35) & (ys < 85)].any()
+    )
+    assert np.array_equal(found, expected)
+
+
+def test_the_core_grid_blocks_only_segments_that_come_too_close_and_most_that_cross():
+    obstacles, court = _donut_and_blocks()
+    obstacles = Obstacles(polygons=(*obstacles.polygons, np.asarray(court.exterior.coords)[:-1]))
+    rng = np.random.default_rng(13)
+    starts = rng.uniform(-100.0, 500.0, (20000, 2))
+    ends = starts + rng.normal(0.0, 150.0, (20000, 2))
+    grid = obstacles.core_grid((-100.0, -100.0, 500.0, 500.0), 5.0)
+    blocked = grid.blocks(starts, ends)
+    close = obstacles.segments_within(np.stack([starts, ends], axis=1), 5.0)
+    crossing = shapely.intersects(
+        shapely.union_all(obstacles.geometries), shapely.linestrings(np.stack([starts, ends], 1))
+    )
+    assert not np.any(blocked & ~close)  # sound: never blocks a clear segment
+    inside_grid = np.all((starts > -100) & (starts < 500) & (ends > -100) & (ends < 500), axis=1)
+    assert np.all(blocked[crossing & inside_grid])  # every crossing inside the grid is caught
+    assert blocked.sum() > 0.5 * close.sum()

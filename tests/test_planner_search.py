@@ -4,6 +4,7 @@ hand-made maps, including the diagnosis when no valid path exists."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -275,6 +276,31 @@ def test_taut_path_under_binding_constraints_is_checked_against_the_full_graph()
     assert plan.level == "full" and plan.certified
     assert plan.length_m == pytest.approx(288.40, abs=0.01)
     np.testing.assert_allclose(plan.path[1], [-35.0, -93.6], atol=1e-9)
+
+
+def test_a_gap_tolerance_ends_the_certification_once_the_path_is_proven_within_it():
+    # Table II map, seed 37: the shortest valid path (1222.07 m) is 4.8 % longer than the
+    # unconstrained one; certifying it exactly takes a search of the full graph.
+    pb = scenario_problem(paper_scenario(seed=37))
+    exact = plan_path(pb)
+    assert exact.certified and exact.lower_bound_m == exact.length_m
+    assert exact.length_m == pytest.approx(1222.07, abs=0.01)
+    # 5 %: the unconstrained length already proves it; no full-graph search, not certified
+    loose = plan_path(replace(pb, gap_tolerance=0.05))
+    assert_valid(loose, pb)
+    assert not loose.certified and not loose.stopped and loose.gap_tolerance == 0.05
+    assert loose.length_m == pytest.approx(exact.length_m)
+    assert loose.length_m * 0.95 <= loose.lower_bound_m < exact.length_m
+    assert loose.expansions < exact.expansions
+    # 2 %: the full graph holds no valid path 2 % shorter, which is the bound proven
+    narrow = plan_path(replace(pb, gap_tolerance=0.02))
+    assert not narrow.certified and narrow.length_m == pytest.approx(exact.length_m)
+    assert exact.length_m * 0.98 - 1e-6 <= narrow.lower_bound_m < exact.length_m
+
+
+def test_gap_tolerance_is_a_fraction_below_one():
+    with pytest.raises(ValueError, match="gap_tolerance"):
+        replace(scenario_problem(paper_scenario()), gap_tolerance=1.0)
 
 
 def test_taut_graph_falls_back_to_the_full_graph():

@@ -20,7 +20,7 @@ from gcs.cli.outputs import output_path, write_output
 from gcs.errors import InputError, RowsRefused
 from gcs.mission import Mission, load_mission
 from gcs.planning import MissionPlan, mission_problem, plan_json, plan_mission
-from planner.numbers import plural
+from planner.numbers import fmt_against, plural
 from planner.search import SearchProgress
 from planner.types import PathPlan
 
@@ -105,10 +105,20 @@ def add_planning_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"stop the path search after S seconds with the best valid path found so far "
         f"(exit 1; default {DEFAULT_TIME_LIMIT_S:g})",
     )
+    parser.add_argument(
+        "--gap",
+        type=_percent,
+        default=DEFAULT_GAP_PCT,
+        metavar="PCT",
+        help="stop certifying once the path is proven at most PCT percent longer than the "
+        f"shortest valid path (default {DEFAULT_GAP_PCT:g}; 0 certifies exactly)",
+    )
 
 
 #: Default `--time-limit` of the path search, seconds.
 DEFAULT_TIME_LIMIT_S = 60.0
+#: Default `--gap`: the certification ends once the path is proven this close (percent).
+DEFAULT_GAP_PCT = 0.01
 #: Without a terminal, a long search prints one progress line this often (seconds).
 PROGRESS_EVERY_S = 10.0
 
@@ -120,6 +130,16 @@ def _seconds(text: str) -> float:
         value = math.nan
     if not math.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return value
+
+
+def _percent(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 <= value < 100.0:
+        raise argparse.ArgumentTypeError(f"expected a percentage from 0 to below 100, got {text!r}")
     return value
 
 
@@ -157,6 +177,7 @@ def plan_with_args(mission: Mission, args: argparse.Namespace) -> MissionPlan:
             connections=tuple(args.connect) if args.connect else None,
             method=args.method,
             time_limit_s=args.time_limit,
+            gap_tolerance=args.gap / 100.0,
             on_progress=on_progress,
         )
     finally:
@@ -189,9 +210,11 @@ def certification_text(pp: PathPlan) -> str:
     gap = pp.length_m - pp.lower_bound_m
     share = gap / pp.lower_bound_m if pp.lower_bound_m > 0 else math.inf
     why = "stopped at the time limit; " if pp.stopped else ""
+    if not pp.stopped and pp.gap_tolerance > 0 and gap <= pp.gap_tolerance * pp.length_m:
+        why = f"within the --gap of {100 * pp.gap_tolerance:g} %: "
     return (
-        f"not certified shortest: {why}at most {gap:,.1f} m ({share:.1%}) longer than the "
-        f"shortest (lower bound {pp.lower_bound_m:,.1f} m)"
+        f"not certified shortest: {why}at most {gap:.3g} m ({100 * share:.3g} %) longer than "
+        f"the shortest (lower bound {fmt_against(pp.lower_bound_m, pp.length_m, 5)} m)"
     )
 
 

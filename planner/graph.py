@@ -387,7 +387,16 @@ class Occlusion:
             s = np.repeat(np.arange(len(index)), len(obstacles))
             o = np.tile(np.arange(len(obstacles)), len(index))
         else:
-            s, o = obstacles.tree.query(where, predicate="dwithin", distance=self._radius)
+            # Dense districts find their nearest obstacles well within the map's mean radius:
+            # a quarter of it first, the whole radius for the nodes short of `_OCCLUDERS`.
+            s, o = obstacles.tree.query(where, predicate="dwithin", distance=self._radius / 4)
+            short = np.flatnonzero(np.bincount(s, minlength=len(index)) < _OCCLUDERS)
+            if len(short):
+                s, o = s[~np.isin(s, short)], o[~np.isin(s, short)]
+                s2, o2 = obstacles.tree.query(
+                    where[short], predicate="dwithin", distance=self._radius
+                )
+                s, o = np.concatenate([s, short[s2]]), np.concatenate([o, o2])
         dist = shapely.distance(where[s], obstacles.geometries[o])
         order = np.lexsort((dist, s))
         s, o = s[order], o[order]
@@ -472,6 +481,7 @@ class EdgeCache:
         self.side_at_dst = np.zeros(0)  # ... and at its destination
         self.radius: float | None = None
         self.goal_distance: np.ndarray | None = None  # the search heuristic, once computed
+        self._grid_bounds: tuple[float, float, float, float] | None = None
         self.occlusion = occlusion or Occlusion(nodes, problem.obstacles, problem.safety_margin)
         pts = nodes.points
         self.uses_sector_reach = False
@@ -668,7 +678,7 @@ class EdgeCache:
             # Before the clearance tests: if v->w is clear, so is its part v->x.
             idx = idx[~_collinear_shadowed(src[idx], dst[idx], d[idx], length[idx], self.radius)]
         idx = idx[~self._occluded(src[idx], dst[idx], d[idx], length[idx])]
-        if self.within is not None and len(idx):
+        if self.within is not None and len(idx):  # (radius-limited pairs are short)
             idx = idx[~self._core_grid().blocks(pts[src[idx]], pts[dst[idx]])]
         segs = np.stack([pts[src[idx]], pts[dst[idx]]], axis=1)
         idx = idx[~self.problem.obstacles.segments_within(segs, rho - DISTANCE_TOLERANCE)]
@@ -679,8 +689,10 @@ class EdgeCache:
 
     def _core_grid(self) -> CoreGrid:
         """Where a segment is certainly too close to an obstacle, over the members."""
-        pts = self.nodes.points[self.members]
-        return self.occlusion.grid((*pts.min(axis=0), *pts.max(axis=0)))
+        if self._grid_bounds is None:
+            pts = self.nodes.points[self.members]
+            self._grid_bounds = (*pts.min(axis=0), *pts.max(axis=0))
+        return self.occlusion.grid(self._grid_bounds)
 
     def _occluded(
         self, src: np.ndarray, dst: np.ndarray, d: np.ndarray, length: np.ndarray

@@ -348,14 +348,19 @@ def _label_search(
     settled: dict[int, int] = {}
     saturated = False
 
+    # the closed segments of a linked tuple as arrays (start points, end points, bounding
+    # boxes), built from its parent's when first needed (the parent's are there by then)
+    closed_arrays: dict[int, tuple[np.ndarray, ...]] = {}
+
     def push(edge: np.ndarray, g: np.ndarray, open_start: np.ndarray, closed) -> None:
-        for e, c, o in zip(edge.tolist(), g.tolist(), open_start.tolist(), strict=True):
-            lab_edge.append(e)
-            lab_g.append(c)
-            lab_open.append(o)
-            lab_closed.append(closed)
-            f = c + weight * float(heuristic[cache.dst[e]])
-            heapq.heappush(heap, (f, -c, len(lab_edge) - 1))
+        first = len(lab_edge)
+        lab_edge.extend(edge.tolist())
+        lab_g.extend(g.tolist())
+        lab_open.extend(open_start.tolist())
+        lab_closed.extend([closed] * len(edge))
+        f = g + weight * heuristic[cache.dst[edge]]
+        for k, (fk, gk) in enumerate(zip(f.tolist(), g.tolist(), strict=True)):
+            heapq.heappush(heap, (fk, -gk, first + k))
 
     def closed_array(closed) -> np.ndarray:
         out = []
@@ -363,6 +368,17 @@ def _label_search(
             out.append(closed[:2])
             closed = closed[2]
         return np.array(out, np.int64).reshape(-1, 2)
+
+    def segments_of(closed) -> tuple[np.ndarray, ...]:
+        key = id(closed)
+        if key not in closed_arrays:
+            a, b = pts[closed[0]][None, :], pts[closed[1]][None, :]
+            row = (a, b, np.minimum(a, b), np.maximum(a, b))
+            if closed[2] is not None:  # newest first, as closed_array lists them
+                parent = segments_of(closed[2])
+                row = tuple(np.vstack([r, p]) for r, p in zip(row, parent, strict=True))
+            closed_arrays[key] = row
+        return closed_arrays[key]
 
     lo, hi = cache.edges(START)
     first = lo + np.flatnonzero(rows.mask(cache, START))
@@ -409,11 +425,8 @@ def _label_search(
         seg_start = np.where(straight, start, v)
         closed = lab_closed[label]
         ok = np.ones(len(local), bool)
-        segs = closed_array(closed)
-        if len(segs):
-            near = _segments_near(
-                pts[seg_start], pts[cache.dst[edge]], pts[segs[:, 0]], pts[segs[:, 1]], limit
-            )
+        if closed is not None:
+            near = _segments_near(pts[seg_start], pts[cache.dst[edge]], segments_of(closed), limit)
             near[straight, 0] = False  # a grown segment is adjacent to the last closed one
             ok = ~near.any(axis=1)
         g = lab_g[label] + cache.length[edge]
@@ -427,12 +440,13 @@ def _label_search(
 
 
 def _segments_near(
-    starts: np.ndarray, ends: np.ndarray, old_starts: np.ndarray, old_ends: np.ndarray, limit: float
+    starts: np.ndarray, ends: np.ndarray, old: tuple[np.ndarray, ...], limit: float
 ) -> np.ndarray:
-    """(k, m): whether new segment i comes closer than `limit` to old segment j. Bounding
-    boxes farther apart than `limit` settle most pairs; shapely measures the others."""
+    """(k, m): whether new segment i comes closer than `limit` to old segment j (`old`:
+    start points, end points, and their boxes' low and high corners). Bounding boxes farther
+    apart than `limit` settle most pairs; shapely measures the others."""
+    old_starts, old_ends, old_low, old_high = old
     low, high = np.minimum(starts, ends), np.maximum(starts, ends)
-    old_low, old_high = np.minimum(old_starts, old_ends), np.maximum(old_starts, old_ends)
     gap = np.maximum(old_low[None, :, :] - high[:, None, :], low[:, None, :] - old_high[None, :, :])
     gap = np.maximum(gap, 0.0)
     near = np.hypot(gap[..., 0], gap[..., 1]) < limit

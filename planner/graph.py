@@ -392,7 +392,8 @@ class Occlusion:
             s, o = obstacles.tree.query(where, predicate="dwithin", distance=self._radius / 4)
             short = np.flatnonzero(np.bincount(s, minlength=len(index)) < _OCCLUDERS)
             if len(short):
-                s, o = s[~np.isin(s, short)], o[~np.isin(s, short)]
+                enough = ~np.isin(s, short)
+                s, o = s[enough], o[enough]
                 s2, o2 = obstacles.tree.query(
                     where[short], predicate="dwithin", distance=self._radius
                 )
@@ -653,7 +654,6 @@ class EdgeCache:
                 inside &= np.all(along > 2.0 * ANGLE_TOLERANCE, axis=1)
             out |= inside
         return out & self.nodes.prunable[index, None]
-        return out
 
     def _compute(self, sources: np.ndarray) -> None:
         nodes = self.nodes

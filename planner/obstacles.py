@@ -21,7 +21,13 @@ class Obstacles:
     polygons: tuple[np.ndarray, ...] = ()
     walls: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
 
+    #: `segments_within` on obstacles of more than `UNION_VERTICES` vertices builds the
+    #: prepared union once this many segments were tested.
+    UNION_AFTER = 20_000
+    UNION_VERTICES = 200_000
+
     def __post_init__(self) -> None:
+        object.__setattr__(self, "_tested", [0])  # segments tested so far (a counter)
         polygons = tuple(np.asarray(p, float).reshape(-1, 2) for p in self.polygons)
         walls = np.asarray(self.walls, float).reshape(-1, 2, 2)
         object.__setattr__(self, "polygons", polygons)
@@ -90,23 +96,47 @@ class Obstacles:
             proper = length > 0.0
             if proper.any():
                 parts.append(shapely.multilinestrings(self.walls[proper]))
-            if not proper.all():
-                parts.append(shapely.multipoints(self.walls[~proper, 0]))
+        if self._wall_points is not None:
+            parts.append(self._wall_points)
         for part in parts:
             shapely.prepare(part)
         return tuple(parts)
+
+    @cached_property
+    def _wall_points(self) -> shapely.Geometry | None:
+        """Zero-length walls as one prepared multi-point (GEOS's predicates skip a degenerate
+        line), or None."""
+        length = np.hypot(*(self.walls[:, 1] - self.walls[:, 0]).T)
+        if np.all(length > 0.0):
+            return None
+        points = shapely.multipoints(self.walls[length <= 0.0, 0])
+        shapely.prepare(points)
+        return points
 
     def segments_within(self, segments: np.ndarray, distance: float) -> np.ndarray:
         """True for each segment (..., 2, 2) that comes within `distance` (inclusive) of an
         obstacle, or enters a solid one. Vectorised over a prepared union of the obstacles:
         segments that cross an obstacle are found by a cheap intersection test first, the
-        exact distance test runs only on the others."""
+        exact distance test runs only on the others. The union of a city of footprints costs
+        seconds (over `UNION_VERTICES` vertices): its first `UNION_AFTER` segments query the
+        STRtree instead."""
         segments = np.asarray(segments, float)
         flat = segments.reshape(-1, 2, 2)
         hit = np.zeros(len(flat), bool)
         if len(flat) == 0 or len(self) == 0:
             return hit.reshape(segments.shape[:-2])
         lines = shapely.linestrings(flat)
+        self._tested[0] += len(flat)
+        if (
+            self._tested[0] <= self.UNION_AFTER
+            and "_prepared_union" not in self.__dict__
+            and len(self.vertices[0]) > self.UNION_VERTICES
+        ):
+            near, _ = self._tree.query(lines, predicate="dwithin", distance=distance)
+            hit[near] = True  # (a solid is an area: a segment inside it is at distance 0)
+            if self._wall_points is not None:  # GEOS skips a degenerate line: as points
+                hit |= shapely.dwithin(self._wall_points, lines, distance)
+            return hit.reshape(segments.shape[:-2])
         for geom in self._prepared_union:
             rest = np.flatnonzero(~hit)
             crossing = shapely.intersects(geom, lines[rest])

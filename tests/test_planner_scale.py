@@ -219,3 +219,25 @@ def test_the_core_grid_blocks_only_segments_that_come_too_close_and_most_that_cr
     inside_grid = np.all((starts > -100) & (starts < 500) & (ends > -100) & (ends < 500), axis=1)
     assert np.all(blocked[crossing & inside_grid])  # every crossing inside the grid is caught
     assert blocked.sum() > 0.5 * close.sum()
+
+
+def test_segments_are_tested_alike_before_and_after_the_prepared_union(monkeypatch):
+    """The first segments go to the STRtree (a city's union costs seconds to build), the
+    later ones to the prepared union: both give every segment the same answer, solids
+    (a segment wholly inside one), walls and a zero-length wall included."""
+    obstacles, court = _donut_and_blocks()
+    rng = np.random.default_rng(5)
+    starts = rng.uniform(-100.0, 500.0, (6000, 2))
+    ends = starts + rng.normal(0.0, 60.0, (6000, 2))
+    inside = rng.uniform([205.0, 25.0], [218.0, 38.0], (50, 2))  # in the first block
+    starts[:50], ends[:50] = inside, inside + 2.0
+    segments = np.stack([starts, ends], axis=1)
+    monkeypatch.setattr(Obstacles, "UNION_VERTICES", 0)  # as for a city of footprints
+    fresh = Obstacles(polygons=obstacles.polygons, walls=obstacles.walls)
+    tree = fresh.segments_within(segments, 5.0)
+    assert "_prepared_union" not in fresh.__dict__
+    monkeypatch.setattr(Obstacles, "UNION_AFTER", 0)
+    union = obstacles.segments_within(segments, 5.0)
+    assert "_prepared_union" in obstacles.__dict__
+    assert tree[:50].all() and 0.05 < tree.mean() < 0.9
+    assert np.array_equal(tree, union)

@@ -36,6 +36,7 @@ import numpy as np
 import shapely
 
 from planner.formation import ANGLE_TOLERANCE, DISTANCE_TOLERANCE, SQRT2, row_direction
+from planner.obstacles import ragged
 
 if TYPE_CHECKING:
     from planner.obstacles import CoreGrid, Obstacles
@@ -412,8 +413,8 @@ class Occlusion:
         flat, offsets = obstacles.vertices
         sizes = offsets[o + 1] - offsets[o]
         first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        pair = np.repeat(np.arange(len(s)), sizes)
-        vertex = offsets[o][pair] + np.arange(len(pair)) - first[pair]
+        pair, rank_in = ragged(sizes)
+        vertex = offsets[o][pair] + rank_in
         verts = flat[vertex] - pts[s][pair]
         centre = np.add.reduceat(verts, first, axis=0) / sizes[:, None]
         ref_s = np.arctan2(centre[:, 1], centre[:, 0])

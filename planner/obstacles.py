@@ -279,8 +279,7 @@ class CoreGrid:
 
     def _sampled_core(self, starts: np.ndarray, ends: np.ndarray, count: np.ndarray) -> np.ndarray:
         """Whether one of `count[k]` evenly spread points of segment k lies in a core cell."""
-        owner = np.repeat(np.arange(len(starts)), count)
-        step = np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)
+        owner, step = ragged(count)
         t = (step + 0.5) / count[owner]
         a = starts[owner]
         at = a + (ends[owner] - a) * t[:, None]
@@ -309,10 +308,8 @@ def _cell_centres_inside(
     first = np.searchsorted(ys, low, side="left")  # rows with low <= y < high
     last = np.searchsorted(ys, high, side="left")
     count = last - first
-    edge = np.repeat(np.arange(len(a)), count)
-    row = (
-        np.repeat(first, count) + np.arange(len(edge)) - np.repeat(np.cumsum(count) - count, count)
-    )
+    edge, step = ragged(count)
+    row = first[edge] + step
     a, b, y = a[edge], b[edge], ys[row]
     x = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
     order = np.lexsort((x, row))
@@ -323,3 +320,10 @@ def _cell_centres_inside(
     change = np.zeros((shape[1], shape[0] + 1), np.int32)
     np.add.at(change, (row, column), np.where(rank % 2 == 0, 1, -1))
     return (np.cumsum(change, axis=1, dtype=np.int32)[:, : shape[0]] > 0).T
+
+
+def ragged(count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For groups of `count[k]` items laid end to end: each item's group and its rank in it
+    (`ragged([2, 0, 3])` is ([0, 0, 2, 2, 2], [0, 1, 0, 1, 2]))."""
+    owner = np.repeat(np.arange(len(count)), count)
+    return owner, np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)

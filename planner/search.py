@@ -57,7 +57,7 @@ from planner.graph import (
     wraps_corner,
 )
 from planner.numbers import plural
-from planner.types import PathPlan, PathProblem
+from planner.types import PathPlan, PathProblem, within_gap
 from planner.validity import (
     PathViolations,
     Refusal,
@@ -362,19 +362,12 @@ def _label_search(
         for k, (fk, gk) in enumerate(zip(f.tolist(), g.tolist(), strict=True)):
             heapq.heappush(heap, (fk, -gk, first + k))
 
-    def closed_array(closed) -> np.ndarray:
-        out = []
-        while closed is not None:
-            out.append(closed[:2])
-            closed = closed[2]
-        return np.array(out, np.int64).reshape(-1, 2)
-
     def segments_of(closed) -> tuple[np.ndarray, ...]:
         key = id(closed)
         if key not in closed_arrays:
             a, b = pts[closed[0]][None, :], pts[closed[1]][None, :]
             row = (a, b, np.minimum(a, b), np.maximum(a, b))
-            if closed[2] is not None:  # newest first, as closed_array lists them
+            if closed[2] is not None:  # newest first
                 parent = segments_of(closed[2])
                 row = tuple(np.vstack([r, p]) for r, p in zip(row, parent, strict=True))
             closed_arrays[key] = row
@@ -395,9 +388,10 @@ def _label_search(
         if lab_g[label] + float(heuristic[v]) >= bound:
             continue  # (weighted search) cannot beat the bound
         if v == GOAL:
-            segs = closed_array(lab_closed[label])[::-1]
-            idx = np.concatenate([segs[:, 0], [lab_open[label], GOAL]]).astype(np.int64)
-            return pts[idx], "found-capped" if saturated else "found"
+            path = pts[[lab_open[label], GOAL]]
+            if lab_closed[label] is not None:  # the closed segments' starts, oldest first
+                path = np.vstack([segments_of(lab_closed[label])[0][::-1], path])
+            return path, "found-capped" if saturated else "found"
         done = settled.get(e, 0)
         if done >= _LABELS_PER_STATE:
             saturated = True
@@ -875,7 +869,7 @@ class _Planner:
             if length <= _at_most(free):
                 taut.certified = True
                 return taut, "taut", None
-        if self.budget.spent or self._within_tolerance(length, taut.lower_bound):
+        if self.budget.spent or within_gap(length, taut.lower_bound, self.problem.gap_tolerance):
             return taut, "taut", None
         full_cache = self.certify_cache(length)
         if full_cache is None:
@@ -900,11 +894,6 @@ class _Planner:
         else:
             taut.lower_bound = max(floor, min(sought, length)) if exhaustive else floor
         return taut, "taut", None
-
-    def _within_tolerance(self, length: float, lower_bound: float) -> bool:
-        """Whether `length` is proven within the problem's gap tolerance of the shortest."""
-        tolerance = self.problem.gap_tolerance
-        return tolerance > 0.0 and length - lower_bound <= tolerance * length
 
     def _why(self, result: _LevelResult, rows: _RowFilter, level: str) -> str:
         if result.status == "cap" or self.budget.spent:

@@ -12,9 +12,15 @@ from planner.formation import ParkingRows, parking_rows
 from planner.obstacles import Obstacles
 from planner.validity import PathViolations
 
-__all__ = ["METHODS", "PathPlan", "PathProblem"]
+__all__ = ["METHODS", "PathPlan", "PathProblem", "within_gap"]
 
 METHODS = ("exact", "penalty")
+
+
+def within_gap(length: float, lower_bound: float, gap_tolerance: float) -> bool:
+    """Whether a path of `length` with a proven `lower_bound` on the shortest valid path is
+    proven within the relative `gap_tolerance` (never with a tolerance of 0)."""
+    return gap_tolerance > 0.0 and length - lower_bound <= gap_tolerance * length
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,3 +133,8 @@ class PathPlan:
     lower_bound_m: float = math.nan
     stopped: bool = False
     gap_tolerance: float = 0.0
+
+    @property
+    def within_gap(self) -> bool:
+        """Not certified, but proven within `gap_tolerance` of the shortest (`within_gap`)."""
+        return within_gap(self.length_m, self.lower_bound_m, self.gap_tolerance)

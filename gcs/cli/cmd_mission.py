@@ -10,6 +10,7 @@ import argparse
 import importlib
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -124,22 +125,21 @@ PROGRESS_EVERY_S = 10.0
 
 
 def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
-    return value
+    return _float_flag(text, lambda v: math.isfinite(v) and v > 0, "a positive number of seconds")
 
 
 def _percent(text: str) -> float:
+    return _float_flag(text, lambda v: 0.0 <= v < 100.0, "a percentage from 0 to below 100")
+
+
+def _float_flag(text: str, accepted: Callable[[float], bool], expected: str) -> float:
+    """A flag's number, or argparse's refusal naming what was `expected`."""
     try:
         value = float(text)
     except ValueError:
         value = math.nan
-    if not 0.0 <= value < 100.0:
-        raise argparse.ArgumentTypeError(f"expected a percentage from 0 to below 100, got {text!r}")
+    if not accepted(value):
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
     return value
 
 
@@ -210,7 +210,7 @@ def certification_text(pp: PathPlan) -> str:
     gap = pp.length_m - pp.lower_bound_m
     share = gap / pp.lower_bound_m if pp.lower_bound_m > 0 else math.inf
     why = "stopped at the time limit; " if pp.stopped else ""
-    if not pp.stopped and pp.gap_tolerance > 0 and gap <= pp.gap_tolerance * pp.length_m:
+    if not pp.stopped and pp.within_gap:
         why = f"within the --gap of {100 * pp.gap_tolerance:g} %: "
     return (
         f"not certified shortest: {why}at most {gap:.3g} m ({100 * share:.3g} %) longer than "

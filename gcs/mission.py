@@ -335,7 +335,7 @@ def read_yaml(path: Path, what: str) -> tuple[str, Any]:
     except OSError as exc:
         raise InputError(path, "", f"a readable file ({exc.strerror or exc})") from None
     try:
-        data = yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+        data = parse_yaml(text)
     except _DuplicateKey as exc:
         raise InputError(path, exc.key, f"each key once (duplicate at line {exc.line})") from None
     except yaml.YAMLError as exc:
@@ -344,6 +344,12 @@ def read_yaml(path: Path, what: str) -> tuple[str, Any]:
         problem = getattr(exc, "problem", None) or "syntax error"
         raise InputError(path, "", f"valid YAML ({problem}{at})") from None
     return text, data
+
+
+def parse_yaml(text: str) -> Any:
+    """YAML text as data, the way mission files are read: safe, duplicate keys refused
+    (`_DuplicateKey`), YAML 1.2 floats such as 1e3."""
+    return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
 
 
 def parse_mission(

@@ -32,7 +32,7 @@ import numpy as np
 import shapely
 import yaml
 
-from gcs.mission import Mission, _Loader, parse_mission
+from gcs.mission import Mission, parse_mission, parse_yaml
 from gcs.study.studyfile import MapGenerator, RunSpec, Study
 
 log = logging.getLogger(__name__)
@@ -92,7 +92,7 @@ def build_mission(study: Study, spec: RunSpec) -> tuple[Mission, dict[str, Any]]
     """The run's mission (before its speed schedule) and the description of its map."""
     from gcs.sim.eval import fixed_speed, led
 
-    base = yaml.load(study.base_text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+    base = parse_yaml(study.base_text)
     params = spec.params
     data = mission_data(base, params)
     name, area = ("base", ())

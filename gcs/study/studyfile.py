@@ -20,15 +20,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from gcs.errors import InputError, join_key
 from gcs.mission import (
     MissionParser,
-    _Loader,
     describe_value,
     load_mission,
     parse_mission,
+    parse_yaml,
     read_yaml,
 )
 from gcs.sim.eval import LEADER_REQUESTS
@@ -424,7 +422,7 @@ class _StudyParser(MissionParser):
         combination may still be refused: that run's row then carries the refusal)."""
         from gcs.study.runs import mission_data
 
-        base = yaml.load(study.base_text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+        base = parse_yaml(study.base_text)
         for name, values in study.axes:
             if name not in ("safety_margin", "radio_range", "radio", "fleet_size"):
                 continue

@@ -61,6 +61,8 @@ _SECTOR_REACH_TARGETS = 1500
 _SECTORS = 32
 #: ... for every member at once when a search has spread over this share of them.
 _SPREAD = 1.0 / 16.0
+#: Radius-limited candidate sets use the core grid when their radius exceeds this many rho_c.
+_CORE_GRID_RADIUS = 20.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -487,12 +489,16 @@ class EdgeCache:
         self.occlusion = occlusion or Occlusion(nodes, problem.obstacles, problem.safety_margin)
         pts = nodes.points
         self.uses_sector_reach = False
+        # the core grid pays for itself on complete candidate sets and on long radii (on
+        # short ones, few pairs cross an obstacle: a dense district's narrow streets)
+        self._use_core_grid = within is not None
         span = pts[self.targets].max(axis=0) - pts[self.targets].min(axis=0)
         self._extent = 2.0 * float(np.hypot(*span)) + 1.0
         if local_candidates is not None and len(self.targets) > 4 * local_candidates:
             area = max(float(span[0] * span[1]), 1.0)
             self.radius = math.sqrt(local_candidates * area / (math.pi * len(self.targets)))
             self._target_tree = shapely.STRtree(shapely.points(pts[self.targets]))
+            self._use_core_grid |= self.radius > _CORE_GRID_RADIUS * problem.safety_margin
         elif len(self.targets) > _SECTOR_REACH_TARGETS and len(problem.obstacles) > _OCCLUDERS:
             self.uses_sector_reach = True
             self._reach = np.full((count, _SECTORS), np.inf)
@@ -526,14 +532,17 @@ class EdgeCache:
 
     # -- batch computation --------------------------------------------------------------
     def _candidate_pairs(self, sources: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Distinct (source, target) pairs to test: every target for A and for every source
-        when the radius is unlimited; otherwise the local pairs, plus B for every source."""
+        """Distinct (source, target) pairs to test: every target for A and B, and for every
+        source when the radius is unlimited; otherwise the local pairs, plus B for every
+        source (B's own set is complete so that B sees every node that sees it: the
+        heuristic's backward search follows B's out-edges)."""
         if self.uses_sector_reach:
             return self._visible_pairs(sources)
-        unlimited = sources if self.radius is None else sources[sources == START]
+        ends = (sources == START) | (sources == GOAL)
+        unlimited = sources if self.radius is None else sources[ends]
         src = [np.repeat(unlimited, len(self.targets))]
         dst = [np.tile(self.targets, len(unlimited))]
-        local = sources if self.radius is None else sources[sources != START]
+        local = sources if self.radius is None else sources[~ends]
         if self.radius is not None and len(local):
             s, t = self._local_pairs(local)
             far_goal = np.hypot(*(self.nodes.points[local] - self.nodes.points[GOAL]).T)
@@ -547,7 +556,7 @@ class EdgeCache:
     def _local_pairs(self, sources: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Targets within the radius; then, for each octant (seen from a source) holding
         fewer than _OCTANT_MIN of them, the nearest _OCTANT_MIN targets in that octant at any
-        distance (one query with the octants as wedges), so open areas are crossed."""
+        distance (`_wedge_targets`), so open areas are crossed."""
         pts = self.nodes.points
         where = shapely.points(pts[sources])
         i, j = self._target_tree.query(where, predicate="dwithin", distance=self.radius)
@@ -557,8 +566,11 @@ class EdgeCache:
         # Dense districts hold many more targets in the radius than the map's mean: keep the
         # nearest `_OCTANT_MAX` per octant (farther ones are mostly hidden behind them).
         if len(i) > _OCTANT_MAX * 8 * len(sources):
-            order = np.lexsort((np.hypot(rel[:, 0], rel[:, 1]), i * 8 + octant))
-            group = (i * 8 + octant)[order]
+            # one sort by (source, octant, distance): distances are below the radius, so
+            # this key orders by group first
+            group = i * 8 + octant
+            order = np.argsort(group * (2.0 * self.radius) + np.hypot(rel[:, 0], rel[:, 1]))
+            group = group[order]
             rank = np.arange(len(order)) - np.searchsorted(group, group, side="left")
             keep = np.sort(order[rank < _OCTANT_MAX])
             i, src, dst, octant = i[keep], src[keep], dst[keep], octant[keep]
@@ -566,32 +578,56 @@ class EdgeCache:
         row, oct_ = np.nonzero(have < _OCTANT_MIN)
         if len(row) == 0:
             return src, dst
-        # Wedges: apex at the source, the octant's two bounding rays, long enough to leave
-        # the map; targets inside them beyond the radius are the candidates.
-        span = self._extent
-        a0 = -math.pi + oct_ * (math.pi / 4.0)
-        a1 = a0 + math.pi / 4.0
-        apex = pts[sources[row]]
-        reach = span / math.cos(math.pi / 8.0)
-        ring = np.stack(
-            [
-                apex,
-                apex + reach * np.column_stack([np.cos(a0), np.sin(a0)]),
-                apex + reach * np.column_stack([np.cos(a1), np.sin(a1)]),
-            ],
-            axis=1,
-        )
-        w, k = self._target_tree.query(shapely.polygons(ring), predicate="intersects")
-        s_new, t_new = sources[row[w]], self.targets[k]
-        d = pts[t_new] - pts[s_new]
-        dist = np.hypot(d[:, 0], d[:, 1])
-        inside = (_octant(d) == oct_[w]) & (dist > self.radius)
-        w, s_new, t_new, dist = w[inside], s_new[inside], t_new[inside], dist[inside]
-        order = np.lexsort((dist, w))
-        w, s_new, t_new = w[order], s_new[order], t_new[order]
-        rank = np.arange(len(w)) - np.searchsorted(w, w, side="left")
-        pick = rank < _OCTANT_MIN
-        return np.concatenate([src, s_new[pick]]), np.concatenate([dst, t_new[pick]])
+        # Wedges: apex at the source, the octant's two bounding rays; targets inside them
+        # beyond the radius are the candidates. First out to 8 radii, then, for the wedges
+        # with fewer than _OCTANT_MIN targets that near, out of the map.
+        s_new, t_new = self._wedge_targets(sources[row], oct_)
+        return np.concatenate([src, s_new]), np.concatenate([dst, t_new])
+
+    def _wedge_targets(
+        self, apex_nodes: np.ndarray, octant: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """For each (node, octant): the nearest _OCTANT_MIN targets in that octant beyond
+        the radius, looked for within 8 radii first, then at any distance."""
+        pts = self.nodes.points
+        s_all, t_all = [], []
+        wedge = np.arange(len(apex_nodes))
+        for reach in (8.0 * self.radius, self._extent):
+            a0 = -math.pi + octant[wedge] * (math.pi / 4.0)
+            a1 = a0 + math.pi / 4.0
+            apex = pts[apex_nodes[wedge]]
+            side = reach / math.cos(math.pi / 8.0)  # the triangle holds the sector to `reach`
+            ring = np.stack(
+                [
+                    apex,
+                    apex + side * np.column_stack([np.cos(a0), np.sin(a0)]),
+                    apex + side * np.column_stack([np.cos(a1), np.sin(a1)]),
+                ],
+                axis=1,
+            )
+            w, k = self._target_tree.query(shapely.polygons(ring), predicate="intersects")
+            s_new, t_new = apex_nodes[wedge[w]], self.targets[k]
+            d = pts[t_new] - pts[s_new]
+            dist = np.hypot(d[:, 0], d[:, 1])
+            inside = (_octant(d) == octant[wedge[w]]) & (dist > self.radius) & (dist <= reach)
+            w, s_new, t_new, dist = w[inside], s_new[inside], t_new[inside], dist[inside]
+            order = np.lexsort((dist, w))
+            w, s_new, t_new = w[order], s_new[order], t_new[order]
+            rank = np.arange(len(w)) - np.searchsorted(w, w, side="left")
+            pick = rank < _OCTANT_MIN
+            found = np.bincount(w[pick], minlength=len(wedge))
+            done = found >= _OCTANT_MIN
+            if reach == self._extent:
+                done[:] = True
+            # a wedge is settled once it holds _OCTANT_MIN within `reach`: nothing beyond
+            # is nearer; the others are looked for again, farther
+            keep = pick & done[w]
+            s_all.append(s_new[keep])
+            t_all.append(t_new[keep])
+            wedge = wedge[~done]
+            if len(wedge) == 0:
+                break
+        return np.concatenate(s_all), np.concatenate(t_all)
 
     def _visible_pairs(self, sources: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Complete candidate sets without testing every pair in full: every target that is
@@ -679,7 +715,7 @@ class EdgeCache:
             # Before the clearance tests: if v->w is clear, so is its part v->x.
             idx = idx[~_collinear_shadowed(src[idx], dst[idx], d[idx], length[idx], self.radius)]
         idx = idx[~self._occluded(src[idx], dst[idx], d[idx], length[idx])]
-        if self.within is not None and len(idx):  # (radius-limited pairs are short)
+        if self._use_core_grid and len(idx):
             idx = idx[~self._core_grid().blocks(pts[src[idx]], pts[dst[idx]])]
         segs = np.stack([pts[src[idx]], pts[dst[idx]]], axis=1)
         idx = idx[~self.problem.obstacles.segments_within(segs, rho - DISTANCE_TOLERANCE)]

@@ -4,11 +4,13 @@ iteration of finite parking rows (DESIGN 3.2) and the diagnosis when no valid pa
 `method="exact"` (default):
 1. A* with a Euclidean heuristic over *directed edges* (state = the last edge). A transition
    is allowed only if the bend is at most 90 degrees; the first and last edges keep within 90
-   degrees of the parking directions (definition 5). The first walk reaching B is the shortest
-   meeting conditions (1)-(4) of definition 4. Each edge is relaxed once, from the cheapest
-   state that allows it (the state after a transition is the new edge alone), so the search
-   costs about as much as a Dijkstra over edges.
-2. If that walk breaks condition (5) or repeats a point (definition 1), a label search
+   degrees of the parking directions (definition 5), and a walk never bends at both ends of
+   an edge shorter than 2 rho_c (but at A: the segments either side of it would come within
+   2 rho_c, condition 5). The first walk reaching B is the shortest meeting conditions
+   (1)-(4) of definition 4 and that part of (5). Each edge is relaxed once, from the cheapest
+   state that allows it (the state after a transition is the new edge alone, or a short
+   edge entered with a bend), so the search costs about as much as a Dijkstra over edges.
+2. If that walk still breaks condition (5) or repeats a point (definition 1), a label search
    enumerates partial walks in order of length (at most `_LABELS_PER_STATE` per directed
    edge), extending one only if the simplified path stays valid: the next-shortest walks of
    DESIGN 3.3, invalid prefixes pruned. It returns the shortest valid path, or proves there is
@@ -83,6 +85,9 @@ LOCAL_CANDIDATES = 250
 LOCAL_CANDIDATES_FULL = 150
 #: Repair search: partial walks kept per directed edge (DESIGN 3.3, next-shortest walks).
 _LABELS_PER_STATE = 8
+#: The repair search runs the heuristic's reverse search on once it has taken this many
+#: labels per node the reverse search has settled (`GoalDistance.extend`).
+_LABELS_PER_SETTLED = 4
 #: At most this many fleet-size rounds (N only grows; rows lengthen each round).
 MAX_FLEET_ROUNDS = 12
 #: Weight of the heuristic in the quick repair search (weighted A*), which finds a valid
@@ -195,72 +200,125 @@ class SearchProgress:
     lower_bound_m: float
 
 
-def goal_distance(cache: EdgeCache, budget: _Budget) -> np.ndarray:
+class GoalDistance:
     """The search heuristic: a lower bound on each node's distance to B over the cache's
     edges with the row, parking-angle and bend rules ignored (a relaxation, so it never
     overestimates a valid walk). An A* runs backwards from B towards A (key: distance to B
-    plus the straight line to A) until it settles A at the unconstrained length L; the nodes
-    it settled get their exact distance, the others max(straight line to B, L - straight
-    line to A), which no path from them can beat (their key is at least L). The result is
-    consistent (it never drops by more than an edge's length along an edge), so the searches
-    may relax each edge once. Edges are symmetric (clearance and tangency are tested at both
-    ends), so a node's out-edges are its in-edges; A is no target, so its own out-edges are
-    read once. Settled nodes count against `max_expansions`. Computed once per cache."""
-    if cache.goal_distance is not None:
-        return cache.goal_distance
-    pts = cache.nodes.points
-    to_goal = np.hypot(*(pts - pts[GOAL]).T)
-    to_start = np.hypot(*(pts - pts[START]).T)
-    dist = np.full(len(pts), math.inf)
-    settled = np.zeros(len(pts), bool)
-    lo, hi = cache.edges(START)
-    from_start = dict(zip(cache.dst[lo:hi].tolist(), cache.length[lo:hi].tolist(), strict=True))
-    dist[GOAL] = 0.0
-    heap = [(float(to_start[GOAL]), GOAL)]
-    reach = float(to_start[GOAL])  # every unsettled node has dist + to_start >= reach
-    while heap:
-        key, w = heapq.heappop(heap)
-        if settled[w]:
-            continue
-        settled[w] = True
-        reach = key
-        if w == START or budget.spent:
-            break
-        budget.used += 1
-        d = float(dist[w])
-        step = from_start.get(w)
-        if step is not None and d + step < dist[START]:
-            dist[START] = d + step
-            heapq.heappush(heap, (d + step, START))
-        lo, hi = cache.edges(w)
-        v = cache.dst[lo:hi]
-        nd = d + cache.length[lo:hi]
-        better = nd < dist[v]
-        v, nd = v[better], nd[better]
-        dist[v] = nd
-        for node, value in zip(v.tolist(), (nd + to_start[v]).tolist(), strict=True):
-            heapq.heappush(heap, (value, node))
-    bound = np.maximum(to_goal, reach - to_start)
-    cache.goal_distance = np.where(settled, dist, bound)
+    plus the straight line to A); every node it settled has its exact distance, every other
+    one max(straight line to B, K - straight line to A) with K the last key settled, which
+    no path from it can beat (its key is at least K). The values are consistent (they never
+    drop by more than an edge's length along an edge), so a search may relax each edge once.
+
+    It first runs until it settles A, at the unconstrained length L (`values`); `extend`
+    runs it on to a larger K, so the repair search, whose labels mostly lie on routes a few
+    metres longer than L, gets their exact distances (with only the straight-line bound,
+    every node near the line from A looks as good as the best route). Edges are symmetric
+    (clearance and tangency are tested at both ends), so a node's out-edges are its
+    in-edges; A is no target and no way through (a valid walk never comes back to it), so
+    its own out-edges are read once. Settled nodes count against `max_expansions`."""
+
+    def __init__(self, cache: EdgeCache, budget: _Budget) -> None:
+        self.cache = cache
+        pts = cache.nodes.points
+        self._to_goal = np.hypot(*(pts - pts[GOAL]).T)
+        self._to_start = np.hypot(*(pts - pts[START]).T)
+        self._dist = np.full(len(pts), math.inf)
+        self._settled = np.zeros(len(pts), bool)
+        lo, hi = cache.edges(START)
+        self._from_start = dict(
+            zip(cache.dst[lo:hi].tolist(), cache.length[lo:hi].tolist(), strict=True)
+        )
+        self._dist[GOAL] = 0.0
+        self._heap = [(float(self._to_start[GOAL]), GOAL)]
+        self.reach = float(self._to_start[GOAL])  # every unsettled node: dist + to_start >= it
+        self.values = self._to_goal
+        self._count = 0
+        self.extend(math.inf, budget)
+
+    @property
+    def open(self) -> bool:
+        """Whether `extend` can settle more nodes."""
+        return bool(self._heap)
+
+    @property
+    def settled(self) -> int:
+        """How many nodes have their exact distance."""
+        return self._count
+
+    def extend(self, key: float, budget: _Budget) -> None:
+        """Settle every node whose key is below `key` (stopping once A is settled on the
+        first call), then refresh `values`."""
+        dist, settled, to_start = self._dist, self._settled, self._to_start
+        cache, heap = self.cache, self._heap
+        first = not settled[START]
+        while heap and heap[0][0] < key and not budget.spent:
+            value, w = heapq.heappop(heap)
+            if settled[w]:
+                continue
+            settled[w] = True
+            self._count += 1
+            self.reach = value
+            if w == START:
+                if first:
+                    break
+                continue
+            budget.used += 1
+            d = float(dist[w])
+            step = self._from_start.get(w)
+            if step is not None and d + step < dist[START]:
+                dist[START] = d + step
+                heapq.heappush(heap, (d + step, START))
+            lo, hi = cache.edges(w)
+            v = cache.dst[lo:hi]
+            nd = d + cache.length[lo:hi]
+            better = (nd < dist[v]) & ~settled[v]
+            v, nd = v[better], nd[better]
+            dist[v] = nd
+            for node, item in zip(v.tolist(), (nd + to_start[v]).tolist(), strict=True):
+                heapq.heappush(heap, (item, node))
+        self.values = np.where(settled, dist, np.maximum(self._to_goal, self.reach - to_start))
+
+
+def goal_distance(cache: EdgeCache, budget: _Budget) -> np.ndarray:
+    """The cache's `GoalDistance` values (computed once per cache, up to settling A)."""
+    return heuristic_of(cache, budget).values
+
+
+def heuristic_of(cache: EdgeCache, budget: _Budget) -> GoalDistance:
+    if cache.goal_distance is None:
+        cache.goal_distance = GoalDistance(cache, budget)
     return cache.goal_distance
 
 
 def _walk_search(
-    cache: EdgeCache, rows: _RowFilter, budget: _Budget, bound: float = math.inf
+    cache: EdgeCache,
+    rows: _RowFilter,
+    budget: _Budget,
+    bound: float = math.inf,
+    short_limit: float = 0.0,
 ) -> tuple[list[int] | None, str]:
     """A* over directed edges; returns (edge numbers of the shortest walk A..B meeting
     conditions (1)-(4), "found") or (None, "exhausted" | "cap" | "bound"); "bound" when
-    no such walk is shorter than `bound`."""
+    no such walk is shorter than `bound`.
+
+    With `short_limit` (2 rho_c), also the part of condition (5) that two edges decide: a
+    walk that bends at both ends of an edge shorter than that, neither end A, has a segment
+    whose neighbours come closer than its length (they meet its ends), so it is not valid.
+    A short edge entered with a bend is then a state of its own (it may only go on
+    straight); entered straight (or from A) it is the edge's ordinary state. In narrow
+    streets most first walks broke (5) only this way, and the repair search cost seconds."""
     nodes = cache.nodes
     heuristic = goal_distance(cache, budget)
     heap: list[tuple[float, float, int, float, int]] = []
+    # states: 2 e (edge e), 2 e + 1 (short edge e entered with a bend)
     pred: dict[int, int] = {}
     remaining: dict[int, np.ndarray] = {}
     left: dict[int, int] = {}  # out-edges of a node not relaxed yet
+    bent_pushed: set[int] = set()
     floor = -math.sin(ANGLE_TOLERANCE)
     tick = 0
 
-    def expand(v: int, edge_in: int, g: float) -> None:
+    def expand(v: int, state_in: int, g: float) -> None:
         nonlocal tick
         lo, hi = cache.edges(v)
         rem = remaining.get(v)
@@ -270,53 +328,73 @@ def _walk_search(
             left[v] = int(np.count_nonzero(rem))
         if left[v] == 0:
             return
-        if edge_in < 0:
+        edge_in = state_in >> 1
+        straight = None
+        if state_in < 0:
             allowed = rem
         else:
             d_in = cache.direction[edge_in]
             dirs = cache.direction[lo:hi]
-            allowed = rem & (dirs @ d_in >= floor)
+            bend = dirs @ d_in
+            allowed = rem & (bend >= floor)
             if cache.taut and nodes.prunable[v]:
                 allowed &= wraps_corner(
                     d_in, dirs, cache.side_at_dst[edge_in], cache.side_at_src[lo:hi]
                 )
+            if short_limit > 0.0:
+                cross = d_in[0] * dirs[:, 1] - d_in[1] * dirs[:, 0]
+                straight = (np.abs(cross) <= ANGLE_TOLERANCE) & (bend > 0)
+                if state_in & 1:  # a short edge entered with a bend goes on straight
+                    allowed = allowed & straight
         local = np.flatnonzero(allowed)
         if len(local) == 0:
             return
-        rem[local] = False
-        left[v] -= len(local)
         edge = lo + local
+        state = 2 * edge
+        if straight is not None:
+            bent_short = ~straight[local] & (cache.length[edge] < short_limit)
+            state[bent_short] += 1
+            # the ordinary state of a short edge entered with a bend stays to be relaxed
+            consumed = local[~bent_short]
+        else:
+            consumed = local
+        rem[consumed] = False
+        left[v] -= len(consumed)
         cost = g + cache.length[edge] + cache.penalty[edge]
         target = cache.dst[edge]
         score = cost + heuristic[target]
-        for e, w, c, f in zip(
-            edge.tolist(), target.tolist(), cost.tolist(), score.tolist(), strict=True
+        for s_out, w, c, f in zip(
+            state.tolist(), target.tolist(), cost.tolist(), score.tolist(), strict=True
         ):
             if left.get(w, 1) == 0:
                 continue  # every out-edge of w is already relaxed from a cheaper state
-            pred[e] = edge_in
+            if s_out & 1:
+                if s_out in bent_pushed:
+                    continue
+                bent_pushed.add(s_out)
+            pred[s_out] = state_in
             tick += 1
-            heapq.heappush(heap, (f, -c, tick, c, e))
+            heapq.heappush(heap, (f, -c, tick, c, s_out))
 
     budget.used += 1
     expand(START, -1, 0.0)
     while heap:
-        f, _, _, g, e = heapq.heappop(heap)
+        f, _, _, g, state = heapq.heappop(heap)
         budget.floor = max(budget.floor, f)
         if f >= bound:
             return None, "bound"
-        w = int(cache.dst[e])
+        w = int(cache.dst[state >> 1])
         if w == GOAL:
-            walk = [e]
+            walk = [state]
             while pred[walk[-1]] >= 0:
                 walk.append(pred[walk[-1]])
-            return walk[::-1], "found"
+            return [s >> 1 for s in walk[::-1]], "found"
         if left.get(w, 1) == 0:
             continue
         if budget.spent:
             return None, "cap"
         budget.used += 1
-        expand(w, e, g)
+        expand(w, state, g)
     return None, "exhausted"
 
 
@@ -336,7 +414,10 @@ def _label_search(
     (status "found" or "found-capped"); otherwise (None, "exhausted" | "capped" | "cap")."""
     nodes = cache.nodes
     pts = nodes.points
-    heuristic = goal_distance(cache, budget)
+    goal = heuristic_of(cache, budget)
+    heuristic = goal.values
+    unconstrained = float(heuristic[START])
+    pops = 0  # labels taken since the heuristic last ran on
     limit = 2.0 * problem.safety_margin - DISTANCE_TOLERANCE
     floor = -math.sin(ANGLE_TOLERANCE)
     # label fields: edge, g, open segment start (node), closed segments (linked tuples)
@@ -379,6 +460,22 @@ def _label_search(
     push(first, cache.length[first], np.full(len(first), START), None)
     while heap:
         f, _, label = heapq.heappop(heap)
+        if weight == 1.0:
+            pops += 1
+            ripe = pops >= _LABELS_PER_SETTLED * goal.settled
+            if f >= goal.reach and ripe and goal.open and not budget.spent:
+                # The labels left lie beyond the exact part of the heuristic, and the labels
+                # taken so far outnumber its settled nodes (a settled node may cost a tile of
+                # edges, a label little): run it on, the window past L doubling each time,
+                # then take the labels in their new order.
+                window = max(2.0 * (f - unconstrained), 2.0 * limit)
+                goal.extend(unconstrained + window, budget)
+                heuristic = goal.values
+                pops = 0
+            fresh = lab_g[label] + float(heuristic[cache.dst[lab_edge[label]]])
+            if fresh > f + DISTANCE_TOLERANCE:
+                heapq.heappush(heap, (fresh, -lab_g[label], label))
+                continue
         if not saturated and weight == 1.0:  # a dropped label may hide a path as short as f
             budget.floor = max(budget.floor, f)
         if f >= bound and weight == 1.0:
@@ -556,7 +653,10 @@ def _exact_level(
 ) -> _LevelResult:
     """Shortest walk meeting (1)-(4); if it breaks (5) or repeats a point, the label search
     for the shortest valid path (DESIGN 3.3). With `bound`, only paths shorter than it."""
-    walk, status = _walk_search(cache, rows, budget, bound)
+    limit = 2.0 * problem.safety_margin - DISTANCE_TOLERANCE
+    walk, status = _walk_search(cache, rows, budget, bound, short_limit=limit)
+    if status == "exhausted":  # the short-edge rule left nothing: say why from the rest
+        walk, status = _walk_search(cache, rows, budget, bound)
     if walk is None:
         return _LevelResult(None, 1, 0, status)
     path, _ = _walk_points(cache, walk)

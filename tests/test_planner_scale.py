@@ -47,6 +47,48 @@ def test_goal_distance_never_overestimates_and_is_consistent(seed):
     assert np.all(h[cache.src[:size]] <= cache.length[:size] + h[cache.dst[:size]] + 1e-6)
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_goal_distance_run_on_settles_every_node_below_the_key_and_stays_a_lower_bound(seed):
+    prob = scenario_problem(random_buildings(40, seed=seed, size=800.0))
+    cache = EdgeCache(prob, graph_nodes(prob), taut=True, prune_collinear=True)
+    budget = search._Budget(10**9)
+    goal = search.heuristic_of(cache, budget)
+    first = goal.values.copy()
+    unconstrained = float(first[START])
+    goal.extend(unconstrained + 300.0, budget)
+    h = goal.values
+    exact = _complete_graph_distances(cache)
+    pts = cache.nodes.points
+    to_start = np.hypot(*(pts - pts[START]).T)
+    reached = np.array(sorted(set(exact) - {START}))
+    truth = np.array([exact[v] for v in reached])
+    assert np.all(h >= first - 1e-9)  # running on only tightens it
+    assert np.all(h[reached] <= truth + 1e-6)
+    below = truth + to_start[reached] < unconstrained + 300.0 - 1e-6
+    assert np.count_nonzero(below) > np.count_nonzero(first[reached] == truth)
+    assert np.allclose(h[reached[below]], truth[below])  # exact where the key is below
+    size = cache.size
+    assert np.all(h[cache.src[:size]] <= cache.length[:size] + h[cache.dst[:size]] + 1e-6)
+
+
+def test_b_sees_every_node_that_sees_it_on_a_radius_limited_map():
+    """The heuristic's backward search follows B's out-edges: B's candidates are complete
+    (like A's). B in open country far from the district, where only the nearest targets of
+    each octant would be its candidates, must still see every node that sees it."""
+    world = random_buildings(400, seed=1, size=1500.0)
+    prob = scenario_problem(world, goal=np.array([3500.0, 1400.0]))
+    cache = EdgeCache(
+        prob, graph_nodes(prob), taut=True, prune_collinear=True, local_candidates=250
+    )
+    assert cache.radius is not None
+    for v in cache.members:
+        cache.edges(int(v))
+    size = cache.size
+    into_goal = set(cache.src[:size][cache.dst[:size] == GOAL].tolist()) - {START}
+    lo, hi = cache.edges(GOAL)
+    assert into_goal and into_goal <= set(cache.dst[lo:hi].tolist())
+
+
 def test_certified_where_complete_candidates_agree():
     prob = scenario_problem(city_grid(12, 10, block=40.0, street=16.0))
     plan = plan_path(prob)

@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from planner import search
 from planner.formation import SQRT2, collision_spacing, min_fleet_size, parking_rows
 from planner.graph import GOAL, KIND_OBSTACLE, KIND_ROW, START, edge_ok, graph_nodes
 from planner.obstacles import Obstacles
@@ -255,6 +256,38 @@ def test_repair_of_condition_5_finds_the_valid_path():
     assert plan.repairs == 1 and plan.iterations == 2
     assert plan.length_m == pytest.approx(332.38, abs=0.01)
     assert plan.certified
+
+
+def test_a_walk_bending_at_both_ends_of_a_short_edge_is_never_the_first_walk():
+    # The shortest walk meeting (1)-(4) turns round two corners 2.8 m apart, one each way:
+    # the segments either side of that edge come within 2 rho_c (condition 5). The walk
+    # search knows that much of (5), so its first walk is already the valid path: no repair.
+    pb = problem(
+        (0.0, 0.0),
+        (200.0, 0.0),
+        Obstacles(
+            polygons=(
+                np.array([[120.2, -2.6], [154.1, -2.6], [154.1, 16.2], [120.2, 16.2]]),
+                np.array([[58.5, -12.0], [94.1, -12.0], [94.1, 25.1], [58.5, 25.1]]),
+                np.array([[34.6, -60.4], [45.6, -60.4], [45.6, -12.5], [34.6, -12.5]]),
+            )
+        ),
+        radio_range=400.0,
+    )
+    planner = search._Planner(pb)
+    rows = search._RowFilter(pb, pb.rows(1), planner.nodes)
+    cache = planner.cache("taut")
+    walk, _ = search._walk_search(cache, rows, planner.budget)  # (1)-(4) alone
+    path, _ = search._walk_points(cache, walk)
+    broken = check_path(path, pb, rows.rows).proximity
+    segment = np.hypot(*np.diff(path, axis=0).T)
+    assert len(broken) and all(
+        j == i + 2 and segment[i + 1] < 2 * RHO for i, j in broken[:, :2].astype(int)
+    )
+    plan = plan_path(pb)
+    assert_valid(plan, pb)
+    assert plan.repairs == 0 and plan.iterations == 1 and plan.certified
+    assert plan.length_m == pytest.approx(211.878, abs=0.001)
 
 
 def test_taut_path_under_binding_constraints_is_checked_against_the_full_graph():

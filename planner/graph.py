@@ -503,6 +503,7 @@ class EdgeCache:
             self.uses_sector_reach = True
             self._reach = np.full((count, _SECTORS), np.inf)
             self._reach_done = np.zeros(count, bool)
+            self._target_xy: np.ndarray | None = None
         # Tiles: a square grid over the members, sized so a batch holds about _BATCH_PAIRS
         # candidate pairs.
         per_node = len(self.targets) if self.radius is None else 1.5 * local_candidates
@@ -643,16 +644,22 @@ class EdgeCache:
             self._sector_reach(self.members)
         self._sector_reach(sources)
         reach, known = self._reach, self._reach_done
-        src = np.repeat(sources, len(self.targets))
-        dst = np.tile(self.targets, len(sources))
-        d = pts[dst] - pts[src]
-        length = np.hypot(d[:, 0], d[:, 1])
-        sector = (np.arctan2(d[:, 1], d[:, 0]) + math.pi) * (_SECTORS / (2.0 * math.pi))
+        if self._target_xy is None:
+            self._target_xy = np.ascontiguousarray(pts[self.targets].T)
+        tx, ty = self._target_xy
+        # (sources, targets) arrays by broadcasting, rows in the order of `sources`
+        dx = tx[None, :] - pts[sources, 0][:, None]
+        dy = ty[None, :] - pts[sources, 1][:, None]
+        length = np.hypot(dx, dy)
+        sector = (np.arctan2(dy, dx) + math.pi) * (_SECTORS / (2.0 * math.pi))
         sector = sector.astype(np.int64) % _SECTORS
-        keep = (length <= reach[src, sector]) & (src != dst)
-        back = (sector[keep] + _SECTORS // 2) % _SECTORS
-        keep[keep] = ~known[dst[keep]] | (length[keep] <= reach[dst[keep], back])
-        return src[keep], dst[keep]
+        keep = length <= np.take_along_axis(reach[sources], sector, axis=1)
+        keep &= self.targets[None, :] != sources[:, None]
+        row, col = np.nonzero(keep)
+        src, dst = sources[row], self.targets[col]
+        back = (sector[row, col] + _SECTORS // 2) % _SECTORS
+        ok = ~known[dst] | (length[row, col] <= reach[dst, back])
+        return src[ok], dst[ok]
 
     def _sector_reach(self, index: np.ndarray) -> None:
         """Fill `_reach` (nodes, `_SECTORS`), how far a node can see into each sector (see

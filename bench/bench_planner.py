@@ -109,6 +109,12 @@ CASES: list[tuple[str, Callable[[], Scenario], int, dict]] = [
     ),
     ("city grid 20 x 16", lambda: city_grid(20, 16), 3, {}),
     ("city grid 60 x 60", lambda: city_grid(60, 60), 1, {}),
+    (
+        "8,000 tiny random obstacles",
+        lambda: random_buildings(8000, seed=1, size=4000.0, building_size=(2.0, 6.0)),
+        1,
+        {},
+    ),
 ]
 TARGETS = {
     "paper Table II (seed 25)": 0.05,
@@ -117,6 +123,7 @@ TARGETS = {
     "200 random buildings": 0.5,
     "city grid 20 x 16": 1.0,
     "city grid 60 x 60": 10.0,
+    "8,000 tiny random obstacles": 5.0,
 }
 
 

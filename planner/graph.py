@@ -61,8 +61,6 @@ _SECTOR_REACH_TARGETS = 1500
 _SECTORS = 32
 #: ... for every member at once when a search has spread over this share of them.
 _SPREAD = 1.0 / 16.0
-#: Radius-limited candidate sets use the core grid when their radius exceeds this many rho_c.
-_CORE_GRID_RADIUS = 20.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -489,16 +487,12 @@ class EdgeCache:
         self.occlusion = occlusion or Occlusion(nodes, problem.obstacles, problem.safety_margin)
         pts = nodes.points
         self.uses_sector_reach = False
-        # the core grid pays for itself on complete candidate sets and on long radii (on
-        # short ones, few pairs cross an obstacle: a dense district's narrow streets)
-        self._use_core_grid = within is not None
         span = pts[self.targets].max(axis=0) - pts[self.targets].min(axis=0)
         self._extent = 2.0 * float(np.hypot(*span)) + 1.0
         if local_candidates is not None and len(self.targets) > 4 * local_candidates:
             area = max(float(span[0] * span[1]), 1.0)
             self.radius = math.sqrt(local_candidates * area / (math.pi * len(self.targets)))
             self._target_tree = shapely.STRtree(shapely.points(pts[self.targets]))
-            self._use_core_grid |= self.radius > _CORE_GRID_RADIUS * problem.safety_margin
         elif len(self.targets) > _SECTOR_REACH_TARGETS and len(problem.obstacles) > _OCCLUDERS:
             self.uses_sector_reach = True
             self._reach = np.full((count, _SECTORS), np.inf)
@@ -722,7 +716,7 @@ class EdgeCache:
             # Before the clearance tests: if v->w is clear, so is its part v->x.
             idx = idx[~_collinear_shadowed(src[idx], dst[idx], d[idx], length[idx], self.radius)]
         idx = idx[~self._occluded(src[idx], dst[idx], d[idx], length[idx])]
-        if self._use_core_grid and len(idx):
+        if self.within is not None and len(idx):  # (radius-limited pairs are short)
             idx = idx[~self._core_grid().blocks(pts[src[idx]], pts[dst[idx]])]
         segs = np.stack([pts[src[idx]], pts[dst[idx]]], axis=1)
         idx = idx[~self.problem.obstacles.segments_within(segs, rho - DISTANCE_TOLERANCE)]

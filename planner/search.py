@@ -298,8 +298,9 @@ def _walk_search(
     short_limit: float = 0.0,
 ) -> tuple[list[int] | None, str]:
     """A* over directed edges; returns (edge numbers of the shortest walk A..B meeting
-    conditions (1)-(4), "found") or (None, "exhausted" | "cap" | "bound"); "bound" when
-    no such walk is shorter than `bound`.
+    conditions (1)-(4), "found") or (None, "exhausted" | "exhausted-short" | "cap" |
+    "bound"); "bound" when no such walk is shorter than `bound`, "exhausted-short" when
+    there is none but the short-edge rule below refused some bend on the way.
 
     With `short_limit` (2 rho_c), also the part of condition (5) that two edges decide: a
     walk that bends at both ends of an edge shorter than that, neither end A, has a segment
@@ -317,9 +318,10 @@ def _walk_search(
     bent_pushed: set[int] = set()
     floor = -math.sin(ANGLE_TOLERANCE)
     tick = 0
+    pruned = False  # whether the short-edge rule refused a bend the others allowed
 
     def expand(v: int, state_in: int, g: float) -> None:
-        nonlocal tick
+        nonlocal tick, pruned
         lo, hi = cache.edges(v)
         rem = remaining.get(v)
         if rem is None:
@@ -345,6 +347,7 @@ def _walk_search(
                 cross = d_in[0] * dirs[:, 1] - d_in[1] * dirs[:, 0]
                 straight = (np.abs(cross) <= ANGLE_TOLERANCE) & (bend > 0)
                 if state_in & 1:  # a short edge entered with a bend goes on straight
+                    pruned |= bool(np.any(allowed & ~straight))
                     allowed = allowed & straight
         local = np.flatnonzero(allowed)
         if len(local) == 0:
@@ -395,7 +398,7 @@ def _walk_search(
             return None, "cap"
         budget.used += 1
         expand(w, state, g)
-    return None, "exhausted"
+    return None, "exhausted-short" if pruned else "exhausted"
 
 
 def _label_search(
@@ -650,13 +653,20 @@ def _exact_level(
     rows: _RowFilter,
     budget: _Budget,
     bound: float = math.inf,
+    explain: bool = False,
 ) -> _LevelResult:
     """Shortest walk meeting (1)-(4); if it breaks (5) or repeats a point, the label search
-    for the shortest valid path (DESIGN 3.3). With `bound`, only paths shorter than it."""
+    for the shortest valid path (DESIGN 3.3). With `bound`, only paths shorter than it.
+    When the walk search's short-edge rule left no walk, there is no valid path either
+    ("exhausted"); with `explain` (the search whose failure is diagnosed) the walks without
+    that rule are searched too, so that the reason names condition (5) when it is the one."""
     limit = 2.0 * problem.safety_margin - DISTANCE_TOLERANCE
     walk, status = _walk_search(cache, rows, budget, bound, short_limit=limit)
-    if status == "exhausted":  # the short-edge rule left nothing: say why from the rest
-        walk, status = _walk_search(cache, rows, budget, bound)
+    if status == "exhausted-short":
+        if explain:
+            walk, status = _walk_search(cache, rows, budget, bound)
+        else:
+            status = "exhausted"
     if walk is None:
         return _LevelResult(None, 1, 0, status)
     path, _ = _walk_points(cache, walk)
@@ -897,7 +907,9 @@ class _Planner:
         ):
             return taut, "full", _SEPARATED
         if taut.status != "cap":
-            full = _exact_level(self.problem, self.cache("full"), rows_filter, self.budget)
+            full = _exact_level(
+                self.problem, self.cache("full"), rows_filter, self.budget, explain=True
+            )
             if full.path is not None:
                 full.certified = full.status == "found" and self.cache("full").radius is None
                 full.lower_bound = _length(full.path) if full.certified else self.straight

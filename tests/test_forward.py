@@ -121,8 +121,14 @@ def test_a_tool_watches_a_live_mission_and_reads_a_parameter_of_one_uav(tmp_path
             assert message is not None, f"positions heard from {sorted(heard)} only"
             heard.add(message.get_srcSystem())
         tool.mav.param_request_read_send(3, 1, b"", 0)  # UAV 3's first parameter
-        answer = _wait(tool, lambda m: m.get_type() == "PARAM_VALUE", time.monotonic() + 20)
-        assert answer is not None and answer.get_srcSystem() == 3
+        # (the ground station's own parameter reads are forwarded to the tool too: on a busy
+        # machine an answer of UAV 1's may still be on its way; only UAV 3's answers this)
+        answer = _wait(
+            tool,
+            lambda m: m.get_type() == "PARAM_VALUE" and m.get_srcSystem() == 3,
+            time.monotonic() + 20,
+        )
+        assert answer is not None, "UAV 3 never answered the tool's PARAM_REQUEST_READ"
         code, out, err = flight.finish(timeout=180)
     finally:
         flight.kill()

@@ -402,7 +402,7 @@ class Occlusion:
         dist = shapely.distance(where[s], obstacles.geometries[o])
         order = np.lexsort((dist, s))
         s, o = s[order], o[order]
-        rank = np.arange(len(s)) - np.searchsorted(s, s, side="left")
+        rank = _rank_in_group(s)
         keep = rank < _OCCLUDERS
         s, o, rank = s[keep], o[keep], rank[keep]
         usable = ~shapely.intersects(obstacles.hulls[o], where[s])
@@ -566,8 +566,7 @@ class EdgeCache:
             group = i * 8 + octant
             order = np.argsort(group * (2.0 * self.radius) + np.hypot(rel[:, 0], rel[:, 1]))
             group = group[order]
-            rank = np.arange(len(order)) - np.searchsorted(group, group, side="left")
-            keep = np.sort(order[rank < _OCTANT_MAX])
+            keep = np.sort(order[_rank_in_group(group) < _OCTANT_MAX])
             i, src, dst, octant = i[keep], src[keep], dst[keep], octant[keep]
         have = np.bincount(i * 8 + octant, minlength=8 * len(sources)).reshape(-1, 8)
         row, oct_ = np.nonzero(have < _OCTANT_MIN)
@@ -608,8 +607,7 @@ class EdgeCache:
             w, s_new, t_new, dist = w[inside], s_new[inside], t_new[inside], dist[inside]
             order = np.lexsort((dist, w))
             w, s_new, t_new = w[order], s_new[order], t_new[order]
-            rank = np.arange(len(w)) - np.searchsorted(w, w, side="left")
-            pick = rank < _OCTANT_MIN
+            pick = _rank_in_group(w) < _OCTANT_MIN
             found = np.bincount(w[pick], minlength=len(wedge))
             done = found >= _OCTANT_MIN
             if reach == self._extent:
@@ -771,6 +769,11 @@ class EdgeCache:
         self.first[sources] = self.size + np.concatenate([[0], np.cumsum(counts)[:-1]])
         self.count[sources] = counts
         self.size = need
+
+
+def _rank_in_group(group: np.ndarray) -> np.ndarray:
+    """Each element's place within its run of equal keys (`group` sorted): 0, 1, 2, ..."""
+    return np.arange(len(group)) - np.searchsorted(group, group, side="left")
 
 
 def _grow(array: np.ndarray, capacity: int) -> np.ndarray:

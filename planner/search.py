@@ -290,6 +290,19 @@ def heuristic_of(cache: EdgeCache, budget: _Budget) -> GoalDistance:
     return cache.goal_distance
 
 
+def _goes_straight(d_in: np.ndarray, dirs: np.ndarray, bend: np.ndarray) -> np.ndarray:
+    """Which unit directions `dirs` (their dot products with `d_in`: `bend`) carry on
+    straight from the unit direction `d_in`, so the segment grows instead of bending."""
+    cross = d_in[0] * dirs[:, 1] - d_in[1] * dirs[:, 0]
+    return (np.abs(cross) <= ANGLE_TOLERANCE) & (bend > 0)
+
+
+def _apart(problem: PathProblem) -> float:
+    """Condition (5): non-adjacent segments closer than this break it (2 rho_c, less the
+    tolerance of a length comparison)."""
+    return 2.0 * problem.safety_margin - DISTANCE_TOLERANCE
+
+
 def _walk_search(
     cache: EdgeCache,
     rows: _RowFilter,
@@ -344,8 +357,7 @@ def _walk_search(
                     d_in, dirs, cache.side_at_dst[edge_in], cache.side_at_src[lo:hi]
                 )
             if short_limit > 0.0:
-                cross = d_in[0] * dirs[:, 1] - d_in[1] * dirs[:, 0]
-                straight = (np.abs(cross) <= ANGLE_TOLERANCE) & (bend > 0)
+                straight = _goes_straight(d_in, dirs, bend)
                 if state_in & 1:  # a short edge entered with a bend goes on straight
                     pruned |= bool(np.any(allowed & ~straight))
                     allowed = allowed & straight
@@ -421,7 +433,7 @@ def _label_search(
     heuristic = goal.values
     unconstrained = float(heuristic[START])
     pops = 0  # labels taken since the heuristic last ran on
-    limit = 2.0 * problem.safety_margin - DISTANCE_TOLERANCE
+    limit = _apart(problem)
     floor = -math.sin(ANGLE_TOLERANCE)
     # label fields: edge, g, open segment start (node), closed segments (linked tuples)
     lab_edge: list[int] = []
@@ -513,8 +525,7 @@ def _label_search(
         if len(local) == 0:
             continue
         edge = lo + local
-        cross = d_in[0] * dirs[local, 1] - d_in[1] * dirs[local, 0]
-        straight = (np.abs(cross) <= ANGLE_TOLERANCE) & (bend[local] > 0)
+        straight = _goes_straight(d_in, dirs[local], bend[local])
         start = lab_open[label]
         seg_start = np.where(straight, start, v)
         closed = lab_closed[label]
@@ -660,7 +671,7 @@ def _exact_level(
     When the walk search's short-edge rule left no walk, there is no valid path either
     ("exhausted"); with `explain` (the search whose failure is diagnosed) the walks without
     that rule are searched too, so that the reason names condition (5) when it is the one."""
-    limit = 2.0 * problem.safety_margin - DISTANCE_TOLERANCE
+    limit = _apart(problem)
     walk, status = _walk_search(cache, rows, budget, bound, short_limit=limit)
     if status == "exhausted-short":
         if explain:

@@ -347,11 +347,17 @@ class Occlusion:
         self.nodes = nodes
         self.obstacles = obstacles
         self.safety_margin = safety_margin
+        # Shadows are cast by the margins merged where they overlap: a segment crossing one
+        # comes within rho_c of a footprint, and a block of touching houses hides what lies
+        # behind it (no single house spans a wide enough angle).
+        if len(obstacles) > _OCCLUDERS:
+            obstacles = obstacles.merged(safety_margin - 2.0 * DISTANCE_TOLERANCE)
+        self.occluders = obstacles
         self.shadow = np.empty((len(nodes), _OCCLUDERS, 4))
         self.shadow[...] = [0.0, np.inf, -np.inf, np.inf]
         self.done = np.zeros(len(nodes), bool)
         self._grid: CoreGrid | None = None
-        self._radius = math.inf  # the nearest obstacles are looked for within it
+        self._radius = math.inf  # the nearest occluders are looked for within it
         if len(obstacles) > _OCCLUDERS:
             box = obstacles.vertices[0]
             span = box.max(axis=0) - box.min(axis=0)
@@ -381,7 +387,7 @@ class Occlusion:
         if len(index) == 0:
             return
         self.done[index] = True
-        obstacles = self.obstacles
+        obstacles = self.occluders
         pts = self.nodes.points[index]
         where = shapely.points(pts)
         if math.isinf(self._radius):

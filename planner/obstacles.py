@@ -198,6 +198,19 @@ class Obstacles:
         inside = shapely.contains(np.array(holes, dtype=object)[:, None], pts[None, :])
         return bool(np.any(inside[:, 0] != inside[:, 1]))
 
+    def merged(self, margin: float) -> Obstacles:
+        """The obstacles grown by `margin` and merged where they overlap, as solid polygons
+        (their outer rings; holes filled): the occluders of `graph.Occlusion`. The growth is
+        polygonal, inscribed in the round one, so a segment that meets one of these polygons
+        comes within `margin` of an obstacle. Touching footprints (terraced houses, a block's
+        buildings) become one occluder that hides everything behind the block, where each
+        house alone spans too narrow an angle to hide anything."""
+        if len(self) == 0:
+            return self
+        grown = shapely.union_all(shapely.buffer(self._geometries, margin, quad_segs=4))
+        rings = shapely.get_exterior_ring(shapely.get_parts(grown))
+        return Obstacles(polygons=[shapely.get_coordinates(r)[:-1] for r in rings])
+
     def _nearest(self, geoms: np.ndarray) -> np.ndarray:
         """Distance from each geometry to its nearest obstacle, in input order."""
         (inputs, _), dist = self._tree.query_nearest(geoms, return_distance=True, all_matches=False)

@@ -908,10 +908,11 @@ class _Planner:
             return result, "penalty", self._why(result, rows_filter, "penalty")
         found = self._ellipse_search(rows_filter) if self.cache("taut").radius else None
         if found is not None:
-            return self._certify(*found, rows_filter)
+            result, cache, level = found
+            return self._certify(result, cache, rows_filter, level)
         taut = _exact_level(self.problem, self.cache("taut"), rows_filter, self.budget)
         if taut.path is not None:
-            return self._certify(taut, self.cache("taut"), rows_filter)
+            return self._certify(taut, self.cache("taut"), rows_filter, "taut")
         problem = self.problem
         if taut.status == "exhausted" and problem.obstacles.separated(
             problem.start, problem.goal, problem.safety_margin - DISTANCE_TOLERANCE
@@ -928,12 +929,19 @@ class _Planner:
             taut = full
         return taut, "full", self._why(taut, rows_filter, "full")
 
-    def _ellipse_search(self, rows: _RowFilter) -> tuple[_LevelResult, EdgeCache] | None:
+    def _ellipse_search(self, rows: _RowFilter) -> tuple[_LevelResult, EdgeCache, str] | None:
         """On a map too large for complete candidate sets: the taut graph with every pair
         examined inside the ellipse |Av| + |vB| < L, searched for a valid path shorter than L,
         L from `ELLIPSE_START` x |AB| growing by `ELLIPSE_GROWTH` until one is found. None when
         the ellipse outgrows `CERTIFY_NODES` nodes (or the budget is spent): the
-        radius-limited taut graph is searched instead."""
+        radius-limited taut graph is searched instead.
+
+        At each L where the taut graph has no valid path, the radius-limited full graph is
+        searched with the same bound: the taut graph bends only where a path wraps a corner,
+        and a parking row or angle may need a bend it does not have (a Vienna street: no
+        taut walk at all, 47 s spent growing the ellipse and exhausting the taut graph
+        before the full graph's 0.6 s search found the path). `_certify` then proves the
+        path found, or finds a shorter one, as for a taut path."""
         length = self.straight * ELLIPSE_START
         while not self.budget.spent:
             cache = self.certify_cache(length, taut=True)
@@ -941,9 +949,14 @@ class _Planner:
                 return None
             result = _exact_level(self.problem, cache, rows, self.budget, length)
             if result.path is not None:
-                return result, cache
+                return result, cache, "taut"
             if result.status == "cap":
                 return None
+            full = _exact_level(self.problem, self.cache("full"), rows, self.budget, length)
+            if full.path is not None:
+                return full, self.cache("full"), "full"
+            if full.status in ("cap", "exhausted"):
+                return None  # no walk at all in the full graph: growing L cannot help it
             length *= ELLIPSE_GROWTH
         return None
 
@@ -969,9 +982,10 @@ class _Planner:
         return self._caches[key]
 
     def _certify(
-        self, taut: _LevelResult, taut_cache: EdgeCache, rows: _RowFilter
+        self, taut: _LevelResult, taut_cache: EdgeCache, rows: _RowFilter, level: str
     ) -> tuple[_LevelResult, str, None]:
-        """Prove the taut path shortest, or find a shorter one. A valid path as short as the
+        """Prove the path found shortest, or find a shorter one (`level`: the graph it came
+        from, taut or, when the taut graph had none, full; "the taut path" below). A valid path as short as the
         unconstrained shortest path over complete candidate sets (the heuristic's value at A,
         rows, angles and bends ignored) is the shortest: no valid path can beat it. The taut
         graph gives that value, with complete candidate sets (inside the ellipse of the taut
@@ -991,12 +1005,12 @@ class _Planner:
             taut.lower_bound = max(self.straight, min(free, length))
             if length <= _at_most(free):
                 taut.certified = True
-                return taut, "taut", None
+                return taut, level, None
         if self.budget.spent or within_gap(length, taut.lower_bound, self.problem.gap_tolerance):
-            return taut, "taut", None
+            return taut, level, None
         full_cache = self.certify_cache(length)
         if full_cache is None:
-            return taut, "taut", None
+            return taut, level, None
         self.budget.floor = 0.0
         # Only a path shorter by more than the gap tolerance would matter.
         sought = length * (1.0 - self.problem.gap_tolerance) - DISTANCE_TOLERANCE
@@ -1016,7 +1030,7 @@ class _Planner:
             taut.lower_bound = length
         else:
             taut.lower_bound = max(floor, min(sought, length)) if exhaustive else floor
-        return taut, "taut", None
+        return taut, level, None
 
     def _why(self, result: _LevelResult, rows: _RowFilter, level: str) -> str:
         if result.status == "cap" or self.budget.spent:

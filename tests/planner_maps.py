@@ -31,3 +31,23 @@ def problem(start, goal, obstacles=NO_OBSTACLES, theta_a=0.0, theta_b=0.0, **kw)
 def square(x0, y0, size):
     """Corners of the axis-aligned square of side `size` with its lower-left corner at x0, y0."""
     return np.array([[x0, y0], [x0 + size, y0], [x0 + size, y0 + size], [x0, y0 + size]], float)
+
+
+def terraced_rows(
+    rows: int = 3,
+    houses: int = 8,
+    width: float = 8.0,
+    depth: float = 12.0,
+    street: float = 20.0,
+    columns: int = 1,
+) -> list[np.ndarray]:
+    """Blocks of `houses` touching `width` x `depth` footprints (terraced houses share their
+    side walls), in `rows` x `columns`, `street` apart, the first block's south-west corner at
+    (0, 0)."""
+    pitch = houses * width + street
+    return [
+        np.array([[x, y], [x + width, y], [x + width, y + depth], [x, y + depth]], float)
+        for y in np.arange(rows) * (depth + street)
+        for x0 in np.arange(columns) * pitch
+        for x in x0 + np.arange(houses) * width
+    ]

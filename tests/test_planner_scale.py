@@ -18,7 +18,7 @@ from planner.obstacles import Obstacles, _cell_centres_inside
 from planner.scenarios import city_grid, random_buildings, scenario_problem
 from planner.search import SearchProgress, goal_distance, plan_path
 from planner.validity import check_path
-from tests.planner_maps import problem, square
+from tests.planner_maps import RHO, problem, square, terraced_rows
 from tests.test_planner_search import REPAIR
 
 
@@ -110,17 +110,23 @@ def _all_edges(cache: EdgeCache) -> set[tuple[int, int]]:
     return set(zip(cache.src[: cache.size].tolist(), cache.dst[: cache.size].tolist(), strict=True))
 
 
+#: 4 x 3 blocks of 6 touching houses (merged into 12 occluders), A and B clear of them.
+TERRACED = problem(
+    (-40.0, -30.0), (230.0, 150.0), Obstacles(polygons=terraced_rows(rows=4, houses=6, columns=3))
+)
+
+
 @pytest.mark.parametrize("taut", [True, False])
 @pytest.mark.parametrize(
     "world",
-    [random_buildings(60, seed=4, size=600.0), city_grid(6, 5, block=40.0, street=16.0)],
-    ids=["random", "grid"],
+    [random_buildings(60, seed=4, size=600.0), city_grid(6, 5, block=40.0, street=16.0), None],
+    ids=["random", "grid", "terraced"],
 )
 def test_sector_reach_finds_every_edge_that_testing_every_pair_finds(monkeypatch, world, taut):
     """Complete candidate sets found through each node's sector reach (what a sector's
-    nearest spanning obstacle hides, and the corner cone's sectors in the taut graph) give
-    exactly the edges of testing every pair."""
-    prob = scenario_problem(world)
+    nearest spanning occluder hides, and the corner cone's sectors in the taut graph) give
+    exactly the edges of testing every pair; the terraced rows' occluders are merged."""
+    prob = TERRACED if world is None else scenario_problem(world)
     nodes = graph_nodes(prob)
     straight = float(np.hypot(*(prob.goal - prob.start)))
     made = {}
@@ -131,6 +137,42 @@ def test_sector_reach_finds_every_edge_that_testing_every_pair_finds(monkeypatch
         made[threshold] = _all_edges(cache)
     assert len(made[0]) > 100
     assert made[0] == made[10**9]
+
+
+def test_touching_footprints_merge_into_one_occluder_within_the_margin():
+    """`Obstacles.merged`: each row of touching houses, grown by the margin, is one polygon
+    that holds the row and stays within the margin of it (a segment meeting it is too close
+    to a house)."""
+    houses = Obstacles(polygons=terraced_rows())
+    merged = houses.merged(RHO)
+    assert len(merged) == 3  # one per row (rows 20 m apart: their margins do not meet)
+    union = shapely.union_all(houses.geometries)
+    assert all(shapely.contains(m, union.intersection(m)) for m in merged.geometries)
+    assert shapely.contains(shapely.union_all(merged.geometries), union)
+    ring_points = merged.vertices[0]
+    assert np.all(houses.distance_to_points(ring_points) <= RHO + 1e-9)
+    # two rows 8 m apart merge: their margins overlap
+    close = Obstacles(polygons=terraced_rows(rows=2, street=8.0))
+    assert len(close.merged(RHO)) == 1
+
+
+def test_a_row_of_touching_houses_hides_what_lies_behind_a_party_wall():
+    """Seen from A in the street, the ray along the wall two houses share bounds each
+    house's angular span (neither hides what lies behind it alone) and lies strictly inside
+    the row's: the merged occluder hides the point beyond the row."""
+    row = Obstacles(polygons=terraced_rows(rows=1, houses=16))  # x 0..128, y 0..12
+    prob = problem((64.0, -8.0), (64.0, -100.0), row)
+    nodes = graph_nodes(prob)
+    behind = np.array([64.0, 90.0])  # straight beyond the party wall at x = 64
+    d = behind - nodes.points[START]
+    angle, length = np.array([math.atan2(d[1], d[0])]), np.array([math.hypot(*d)])
+    merged = graph.Occlusion(nodes, prob.obstacles, prob.safety_margin)
+    merged.ensure(np.array([START]))
+    assert merged.in_shadow(np.array([START]), angle, length)[0]
+    alone = graph.Occlusion(nodes, prob.obstacles, prob.safety_margin)
+    alone.occluders = prob.obstacles  # the houses one by one
+    alone.ensure(np.array([START]))
+    assert not alone.in_shadow(np.array([START]), angle, length)[0]
 
 
 @pytest.fixture(scope="module")
@@ -160,6 +202,31 @@ def test_without_room_to_certify_the_bound_is_the_straight_line(dense):
     straight = float(np.hypot(*(dense.goal - dense.start)))
     assert plan.lower_bound_m == pytest.approx(straight)
     assert plan.lower_bound_m < plan.length_m
+
+
+def test_where_the_taut_graph_lacks_a_bend_the_full_graph_is_searched_at_the_same_bound(
+    dense, monkeypatch
+):
+    """On a radius-limited map, when the taut graph has no valid path inside the ellipse
+    (here: it may bend nowhere but at A and B), the full graph is searched with the same
+    bound and its path is certified as a taut one would be. Before, the ellipse grew until
+    it outgrew CERTIFY_NODES and the path found came uncertified from the radius-limited
+    graphs (a Vienna street: 47 s instead of 4 s)."""
+    expected = plan_path(dense)
+    monkeypatch.setattr(search, "wraps_corner", lambda d_in, dirs, *_: np.zeros(len(dirs), bool))
+    grown: list[float] = []
+    original = search._Planner.certify_cache
+
+    def certify_cache(self, length, taut=False):
+        grown.append(length)
+        return original(self, length, taut)
+
+    monkeypatch.setattr(search._Planner, "certify_cache", certify_cache)
+    plan = plan_path(dense)
+    assert plan.valid and plan.level == "full" and plan.certified
+    assert plan.length_m == pytest.approx(expected.length_m, abs=1e-6)
+    straight = float(np.hypot(*(dense.goal - dense.start)))
+    assert max(grown) < 1.5 * straight  # the ellipse did not grow far
 
 
 def _stop_after(polls: int):

@@ -856,6 +856,9 @@ class _Planner:
     ) -> None:
         self.problem = problem
         self.straight = float(np.hypot(*(problem.goal - problem.start)))
+        #: Proven lower bound on every valid path (m): the straight line, raised by the
+        #: ellipses searched in vain (`_ellipse_search`).
+        self.floor = self.straight
         poll = None
         if progress is not None:
 
@@ -924,7 +927,7 @@ class _Planner:
             )
             if full.path is not None:
                 full.certified = full.status == "found" and self.cache("full").radius is None
-                full.lower_bound = _length(full.path) if full.certified else self.straight
+                full.lower_bound = _length(full.path) if full.certified else self.floor
                 return full, "full", None
             taut = full
         return taut, "full", self._why(taut, rows_filter, "full")
@@ -952,6 +955,10 @@ class _Planner:
                 return result, cache, "taut"
             if result.status == "cap":
                 return None
+            # Every path shorter than L lies in the ellipse, so it is at least as long as
+            # the unconstrained shortest path there (rows, angles and bends ignored).
+            free = float(goal_distance(cache, self.budget)[START])
+            self.floor = max(self.floor, min(free, length))
             full = _exact_level(self.problem, self.cache("full"), rows, self.budget, length)
             if full.path is not None:
                 return full, self.cache("full"), "full"
@@ -997,12 +1004,12 @@ class _Planner:
         proven lower bound: that value, or the last f the bounded search reached."""
         length = _length(taut.path)
         self.budget.best = min(self.budget.best, length)
-        taut.lower_bound = self.straight
+        taut.lower_bound = self.floor
         if taut_cache.radius is not None:  # complete candidate sets inside the ellipse
             taut_cache = self.certify_cache(length, taut=True)
         if taut_cache is not None:
             free = float(goal_distance(taut_cache, self.budget)[START])
-            taut.lower_bound = max(self.straight, min(free, length))
+            taut.lower_bound = max(self.floor, min(free, length))
             if length <= _at_most(free):
                 taut.certified = True
                 return taut, level, None

@@ -229,6 +229,19 @@ def test_where_the_taut_graph_lacks_a_bend_the_full_graph_is_searched_at_the_sam
     assert max(grown) < 1.5 * straight  # the ellipse did not grow far
 
 
+def test_an_ellipse_searched_in_vain_raises_the_lower_bound(dense, monkeypatch):
+    """Every path shorter than L lies inside the ellipse of L: when the ellipse holds no
+    valid path, min(L, the unconstrained shortest path inside it) is a lower bound, kept
+    when the next ellipse is too large to certify in (it was the straight line)."""
+    straight = float(np.hypot(*(dense.goal - dense.start)))
+    monkeypatch.setattr(search, "ELLIPSE_START", 1.01)  # 918 nodes; the path needs 1.043
+    monkeypatch.setattr(search, "ELLIPSE_GROWTH", 1.02)  # 1.0302: over 1,400 nodes
+    monkeypatch.setattr(search, "CERTIFY_NODES", 1400)
+    plan = plan_path(dense)
+    assert plan.valid and not plan.certified
+    assert 1.01 * straight - 1e-6 <= plan.lower_bound_m < plan.length_m
+
+
 def _stop_after(polls: int):
     seen: list[SearchProgress] = []
 

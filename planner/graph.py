@@ -353,6 +353,7 @@ class Occlusion:
         if len(obstacles) > _OCCLUDERS:
             obstacles = obstacles.merged(safety_margin - 2.0 * DISTANCE_TOLERANCE)
         self.occluders = obstacles
+        self._verdicts: dict[int, int] = {}  # pair key -> 1 clear, 0 blocked (`verdicts`)
         self.shadow = np.empty((len(nodes), _OCCLUDERS, 4))
         self.shadow[...] = [0.0, np.inf, -np.inf, np.inf]
         self.done = np.zeros(len(nodes), bool)
@@ -372,6 +373,20 @@ class Occlusion:
         rel = np.mod(angle[:, None] - ref + math.pi, 2.0 * math.pi) - math.pi
         inside = (rel > low + ANGLE_TOLERANCE) & (rel < high - ANGLE_TOLERANCE)
         return np.any(inside & (length[:, None] > far + DISTANCE_TOLERANCE), axis=1)
+
+    def pair_keys(self, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+        """One key per unordered node pair (the clearance test is symmetric)."""
+        return np.minimum(src, dst).astype(np.int64) * len(self.nodes) + np.maximum(src, dst)
+
+    def verdicts(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(known, clear) per pair key: whether an ellipse cache has tested the pair's
+        clearance already, and its answer."""
+        get = self._verdicts.get
+        found = np.fromiter((get(k, 2) for k in keys.tolist()), np.int8, len(keys))
+        return found != 2, found == 1
+
+    def record(self, keys: np.ndarray, clear: np.ndarray) -> None:
+        self._verdicts.update(zip(keys.tolist(), clear.astype(np.int8).tolist(), strict=True))
 
     def grid(self, bounds: tuple[float, float, float, float]) -> CoreGrid:
         """A core grid covering `bounds` (the last one built when it does)."""
@@ -721,9 +736,21 @@ class EdgeCache:
             idx = idx[~_collinear_shadowed(src[idx], dst[idx], d[idx], length[idx], self.radius)]
         idx = idx[~self._occluded(src[idx], dst[idx], d[idx], length[idx])]
         if self.within is not None and len(idx):  # (radius-limited pairs are short)
-            idx = idx[~self._core_grid().blocks(pts[src[idx]], pts[dst[idx]])]
-        segs = np.stack([pts[src[idx]], pts[dst[idx]]], axis=1)
-        idx = idx[~self.problem.obstacles.segments_within(segs, rho - DISTANCE_TOLERANCE)]
+            # Ellipse caches overlap (each growth of L, then certification): a pair tested
+            # by one is not tested again.
+            keys = self.occlusion.pair_keys(src[idx], dst[idx])
+            known, clear = self.occlusion.verdicts(keys)
+            fresh = idx[~known]
+            blocked = self._core_grid().blocks(pts[src[fresh]], pts[dst[fresh]])
+            segs = np.stack([pts[src[fresh[~blocked]]], pts[dst[fresh[~blocked]]]], axis=1)
+            blocked[~blocked] = self.problem.obstacles.segments_within(
+                segs, rho - DISTANCE_TOLERANCE
+            )
+            self.occlusion.record(keys[~known], ~blocked)
+            idx = np.sort(np.concatenate([idx[known & clear], fresh[~blocked]]))
+        else:
+            segs = np.stack([pts[src[idx]], pts[dst[idx]]], axis=1)
+            idx = idx[~self.problem.obstacles.segments_within(segs, rho - DISTANCE_TOLERANCE)]
         src, dst, d, length = src[idx], dst[idx], d[idx], length[idx]
         order = np.argsort(src, kind="stable")
         src, dst, d, length = src[order], dst[order], d[order], length[order]

@@ -139,6 +139,30 @@ def test_sector_reach_finds_every_edge_that_testing_every_pair_finds(monkeypatch
     assert made[0] == made[10**9]
 
 
+def test_a_grown_ellipse_reuses_the_clearance_verdicts_and_finds_the_same_edges():
+    """Ellipse caches of one problem share their pairs' clearance verdicts: the grown
+    ellipse has exactly the edges it has alone, and tests in detail only the pairs the first
+    one did not."""
+    prob = TERRACED
+    nodes = graph_nodes(prob)
+    straight = float(np.hypot(*(prob.goal - prob.start)))
+    shared = graph.Occlusion(nodes, prob.obstacles, prob.safety_margin)
+    tested = prob.obstacles._tested
+    made, cost = {}, {}
+    for name, occlusion, within in (
+        ("first", shared, 1.1 * straight),
+        ("grown", shared, 1.3 * straight),
+        ("alone", graph.Occlusion(nodes, prob.obstacles, prob.safety_margin), 1.3 * straight),
+    ):
+        before = tested[0]
+        cache = EdgeCache(
+            prob, nodes, taut=False, prune_collinear=True, within=within, occlusion=occlusion
+        )
+        made[name], cost[name] = _all_edges(cache), tested[0] - before
+    assert made["grown"] == made["alone"] and len(made["first"]) < len(made["alone"])
+    assert cost["grown"] < cost["alone"] - cost["first"] / 2
+
+
 def test_touching_footprints_merge_into_one_occluder_within_the_margin():
     """`Obstacles.merged`: each row of touching houses, grown by the margin, is one polygon
     that holds the row and stays within the margin of it (a segment meeting it is too close

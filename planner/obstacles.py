@@ -198,18 +198,24 @@ class Obstacles:
         inside = shapely.contains(np.array(holes, dtype=object)[:, None], pts[None, :])
         return bool(np.any(inside[:, 0] != inside[:, 1]))
 
-    def merged(self, margin: float) -> Obstacles:
-        """The obstacles grown by `margin` and merged where they overlap, as solid polygons
-        (their outer rings; holes filled): the occluders of `graph.Occlusion`. The growth is
-        polygonal, inscribed in the round one, so a segment that meets one of these polygons
-        comes within `margin` of an obstacle. Touching footprints (terraced houses, a block's
-        buildings) become one occluder that hides everything behind the block, where each
-        house alone spans too narrow an angle to hide anything."""
-        if len(self) == 0:
+    def merged(self, gap: float) -> Obstacles:
+        """The obstacles with every group of polygons less than `gap` apart (touching, in
+        practice: terraced houses, a block's buildings) grown by `gap` / 2 and merged into one
+        solid polygon (its outer ring; holes filled): the occluders of `graph.Occlusion`.
+        The growth is polygonal, inscribed in the round one, so a segment that meets a
+        merged polygon comes within `gap` / 2 of an obstacle. A row of terraced houses is
+        one occluder that hides everything behind it, where each house alone spans too
+        narrow an angle to hide anything. Walls and polygons apart are kept as they are."""
+        solids = self._geometries[: len(self.polygons)]
+        first, second = self._tree.query(solids, predicate="dwithin", distance=gap)
+        touching = np.unique(first[first != second])
+        if len(touching) == 0:
             return self
-        grown = shapely.union_all(shapely.buffer(self._geometries, margin, quad_segs=4))
-        rings = shapely.get_exterior_ring(shapely.get_parts(grown))
-        return Obstacles(polygons=[shapely.get_coordinates(r)[:-1] for r in rings])
+        grown = shapely.buffer(solids[touching], gap / 2.0, quad_segs=1)
+        merged = shapely.get_parts(shapely.union_all(grown))
+        rings = [shapely.get_coordinates(r)[:-1] for r in shapely.get_exterior_ring(merged)]
+        alone = np.setdiff1d(np.arange(len(self.polygons)), touching)
+        return Obstacles(polygons=[self.polygons[k] for k in alone] + rings, walls=self.walls)
 
     def _nearest(self, geoms: np.ndarray) -> np.ndarray:
         """Distance from each geometry to its nearest obstacle, in input order."""

@@ -939,8 +939,10 @@ class _Planner:
         the ellipse outgrows `CERTIFY_NODES` nodes (or the budget is spent): the
         radius-limited taut graph is searched instead.
 
-        At each L where the taut graph has no valid path, the radius-limited full graph is
-        searched with the same bound: the taut graph bends only where a path wraps a corner,
+        At each L where the taut graph has no valid path although a route shorter than L
+        exists (the unconstrained shortest path, rows, angles and bends ignored), the
+        radius-limited full graph is searched with the same bound: the taut graph bends only
+        where a path wraps a corner,
         and a parking row or angle may need a bend it does not have (a Vienna street: no
         taut walk at all, 47 s spent growing the ellipse and exhausting the taut graph
         before the full graph's 0.6 s search found the path). `_certify` then proves the
@@ -959,11 +961,12 @@ class _Planner:
             # the unconstrained shortest path there (rows, angles and bends ignored).
             free = float(goal_distance(cache, self.budget)[START])
             self.floor = max(self.floor, min(free, length))
-            full = _exact_level(self.problem, self.cache("full"), rows, self.budget, length)
-            if full.path is not None:
-                return full, self.cache("full"), "full"
-            if full.status in ("cap", "exhausted"):
-                return None  # no walk at all in the full graph: growing L cannot help it
+            if free < length:  # routes shorter than L exist, none valid in the taut graph
+                full = _exact_level(self.problem, self.cache("full"), rows, self.budget, length)
+                if full.path is not None:
+                    return full, self.cache("full"), "full"
+                if full.status in ("cap", "exhausted"):
+                    return None  # no walk at all in the full graph: growing L cannot help it
             length *= ELLIPSE_GROWTH
         return None
 

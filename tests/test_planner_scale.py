@@ -18,7 +18,7 @@ from planner.obstacles import Obstacles, _cell_centres_inside
 from planner.scenarios import city_grid, random_buildings, scenario_problem
 from planner.search import SearchProgress, goal_distance, plan_path
 from planner.validity import check_path
-from tests.planner_maps import RHO, problem, square, terraced_rows
+from tests.planner_maps import problem, square, terraced_rows
 from tests.test_planner_search import REPAIR
 
 
@@ -163,21 +163,21 @@ def test_a_grown_ellipse_reuses_the_clearance_verdicts_and_finds_the_same_edges(
     assert cost["grown"] < cost["alone"] - cost["first"] / 2
 
 
-def test_touching_footprints_merge_into_one_occluder_within_the_margin():
-    """`Obstacles.merged`: each row of touching houses, grown by the margin, is one polygon
-    that holds the row and stays within the margin of it (a segment meeting it is too close
-    to a house)."""
-    houses = Obstacles(polygons=terraced_rows())
-    merged = houses.merged(RHO)
-    assert len(merged) == 3  # one per row (rows 20 m apart: their margins do not meet)
+def test_touching_footprints_merge_into_one_occluder_that_stays_within_the_gap():
+    """`Obstacles.merged`: each row of touching houses is one polygon that holds the row and
+    stays within half the gap of it (a segment meeting it comes that close to a house, less
+    than rho_c); rows farther apart than the gap, and lone footprints, stay as they are."""
+    houses = Obstacles(polygons=terraced_rows())  # 3 rows of 8, 20 m apart
+    lone = square(200.0, 200.0, 10.0)
+    merged = Obstacles(polygons=[*houses.polygons, lone]).merged(1.0)
+    assert len(merged) == 4  # one per row, and the lone square
+    assert any(len(p) == 4 and np.allclose(p, lone) for p in merged.polygons)
     union = shapely.union_all(houses.geometries)
-    assert all(shapely.contains(m, union.intersection(m)) for m in merged.geometries)
     assert shapely.contains(shapely.union_all(merged.geometries), union)
-    ring_points = merged.vertices[0]
-    assert np.all(houses.distance_to_points(ring_points) <= RHO + 1e-9)
-    # two rows 8 m apart merge: their margins overlap
-    close = Obstacles(polygons=terraced_rows(rows=2, street=8.0))
-    assert len(close.merged(RHO)) == 1
+    assert np.all(houses.distance_to_points(merged.vertices[0][4:]) <= 0.5 + 1e-9)  # lone first
+    # a gap of 1 cm (coordinates rounded through longitude and latitude) still merges
+    shifted = [h + [0.01 * k, 0.0] for k, h in enumerate(terraced_rows(rows=1))]
+    assert len(Obstacles(polygons=shifted).merged(1.0)) == 1
 
 
 def test_a_row_of_touching_houses_hides_what_lies_behind_a_party_wall():

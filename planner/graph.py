@@ -28,6 +28,7 @@ is the same line, with valid edges whenever v->w is valid (the returned path is 
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -385,8 +386,10 @@ class Occlusion:
     def verdicts(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(known, clear) per pair key: whether an ellipse cache has tested the pair's
         clearance already, and its answer."""
-        get = self._verdicts.get
-        found = np.fromiter((get(k, 2) for k in keys.tolist()), np.int8, len(keys))
+        if not self._verdicts:
+            return np.zeros(len(keys), bool), np.zeros(len(keys), bool)
+        found = map(self._verdicts.get, keys.tolist(), itertools.repeat(2, len(keys)))
+        found = np.fromiter(found, np.int8, len(keys))
         return found != 2, found == 1
 
     def record(self, keys: np.ndarray, clear: np.ndarray) -> None:

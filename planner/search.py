@@ -858,13 +858,13 @@ class _Planner:
         self.straight = float(np.hypot(*(problem.goal - problem.start)))
         #: Proven lower bound on every valid path (m): the straight line, raised by the
         #: ellipses searched in vain (`_ellipse_search`).
-        self.floor = self.straight
+        self.lower_bound = self.straight
         poll = None
         if progress is not None:
 
             def poll(used: int) -> bool:
                 best = self.budget.best
-                bound = min(max(self.straight, self.budget.floor), best)
+                bound = min(max(self.lower_bound, self.budget.floor), best)
                 return progress(SearchProgress(used, best if best < math.inf else math.nan, bound))
 
         self.budget = _Budget(problem.max_expansions, poll=poll)
@@ -927,7 +927,7 @@ class _Planner:
             )
             if full.path is not None:
                 full.certified = full.status == "found" and self.cache("full").radius is None
-                full.lower_bound = _length(full.path) if full.certified else self.floor
+                full.lower_bound = _length(full.path) if full.certified else self.lower_bound
                 return full, "full", None
             taut = full
         return taut, "full", self._why(taut, rows_filter, "full")
@@ -942,11 +942,11 @@ class _Planner:
         At each L where the taut graph has no valid path although a route shorter than L
         exists (the unconstrained shortest path, rows, angles and bends ignored), the
         radius-limited full graph is searched with the same bound: the taut graph bends only
-        where a path wraps a corner,
-        and a parking row or angle may need a bend it does not have (a Vienna street: no
-        taut walk at all, 47 s spent growing the ellipse and exhausting the taut graph
-        before the full graph's 0.6 s search found the path). `_certify` then proves the
-        path found, or finds a shorter one, as for a taut path."""
+        where a path wraps a corner, and a parking row or angle may need a bend it does not
+        have (a Vienna street: no taut walk at all, 47 s spent growing the ellipse and
+        exhausting the taut graph before the full graph's 0.6 s search found the path).
+        `_certify` then proves the path found, or finds a shorter one, as for a taut path.
+        Each L searched in vain raises `lower_bound`."""
         length = self.straight * ELLIPSE_START
         while not self.budget.spent:
             cache = self.certify_cache(length, taut=True)
@@ -960,7 +960,7 @@ class _Planner:
             # Every path shorter than L lies in the ellipse, so it is at least as long as
             # the unconstrained shortest path there (rows, angles and bends ignored).
             free = float(goal_distance(cache, self.budget)[START])
-            self.floor = max(self.floor, min(free, length))
+            self.lower_bound = max(self.lower_bound, min(free, length))
             if free < length:  # routes shorter than L exist, none valid in the taut graph
                 full = _exact_level(self.problem, self.cache("full"), rows, self.budget, length)
                 if full.path is not None:
@@ -995,8 +995,8 @@ class _Planner:
         self, taut: _LevelResult, taut_cache: EdgeCache, rows: _RowFilter, level: str
     ) -> tuple[_LevelResult, str, None]:
         """Prove the path found shortest, or find a shorter one (`level`: the graph it came
-        from, taut or, when the taut graph had none, full; "the taut path" below). A valid path as short as the
-        unconstrained shortest path over complete candidate sets (the heuristic's value at A,
+        from, taut or, when the taut graph had none, full; "the taut path" below). A valid
+        path as short as the unconstrained shortest path over complete candidate sets (the heuristic's value at A,
         rows, angles and bends ignored) is the shortest: no valid path can beat it. The taut
         graph gives that value, with complete candidate sets (inside the ellipse of the taut
         length when the map is large: unconstrained shortest paths are taut). Otherwise the full graph
@@ -1007,12 +1007,12 @@ class _Planner:
         proven lower bound: that value, or the last f the bounded search reached."""
         length = _length(taut.path)
         self.budget.best = min(self.budget.best, length)
-        taut.lower_bound = self.floor
+        taut.lower_bound = self.lower_bound
         if taut_cache.radius is not None:  # complete candidate sets inside the ellipse
             taut_cache = self.certify_cache(length, taut=True)
         if taut_cache is not None:
             free = float(goal_distance(taut_cache, self.budget)[START])
-            taut.lower_bound = max(self.floor, min(free, length))
+            taut.lower_bound = max(self.lower_bound, min(free, length))
             if length <= _at_most(free):
                 taut.certified = True
                 return taut, level, None

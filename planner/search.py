@@ -173,7 +173,10 @@ class _Budget:
 
     limit: int
     used: int = 0
-    floor: float = 0.0  # the current search's proven lower bound (f of its last state)
+    floor: float = 0.0  # the current search's lower bound (f of its last state)
+    #: Whether `floor` bounds every valid path (the certification's search over complete
+    #: candidate sets); a search of the taut or a radius-limited graph bounds only its walks.
+    proving: bool = False
     best: float = math.inf  # length of the shortest valid path found so far
     poll: Callable[[int], bool] | None = None
     stopped: bool = False
@@ -864,7 +867,10 @@ class _Planner:
 
             def poll(used: int) -> bool:
                 best = self.budget.best
-                bound = min(max(self.lower_bound, self.budget.floor), best)
+                bound = self.lower_bound
+                if self.budget.proving:
+                    bound = max(bound, self.budget.floor)
+                bound = min(bound, best)
                 return progress(SearchProgress(used, best if best < math.inf else math.nan, bound))
 
         self.budget = _Budget(problem.max_expansions, poll=poll)
@@ -1021,10 +1027,11 @@ class _Planner:
         full_cache = self.certify_cache(length)
         if full_cache is None:
             return taut, level, None
-        self.budget.floor = 0.0
+        self.budget.floor, self.budget.proving = 0.0, True
         # Only a path shorter by more than the gap tolerance would matter.
         sought = length * (1.0 - self.problem.gap_tolerance) - DISTANCE_TOLERANCE
         full = _exact_level(self.problem, full_cache, rows, self.budget, sought)
+        self.budget.proving = False
         free = float(goal_distance(full_cache, self.budget)[START])
         floor = max(taut.lower_bound, min(free, length), min(self.budget.floor, length))
         if full.path is not None:

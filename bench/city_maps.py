@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -174,8 +175,8 @@ def _feature(ring_lonlat: np.ndarray, properties: dict) -> dict:
 
 def write_maps(data: Path, out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
-    (out / "vienna.geojson").write_bytes((data / "vienna.geojson").read_bytes())
-    (out / "betshemesh.geojson").write_bytes((data / "betshemesh.geojson").read_bytes())
+    for name in ("vienna.geojson", "betshemesh.geojson"):
+        shutil.copyfile(data / name, out / name)
     text = (data / "mumbai.js").read_text(encoding="utf-8")
     mumbai = json.loads(text[text.index("{") :].rstrip().rstrip(";"))
     (out / "mumbai.geojson").write_text(json.dumps(mumbai))

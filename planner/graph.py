@@ -55,7 +55,7 @@ _OCCLUDERS = 12
 #: up to the rounding of coordinates. Merging all whose margins overlap hid more on a
 #: synthetic terraced district (23 s instead of 38 s) but cost real districts 10-40 %: a
 #: node in a merged block's concave bay loses that block as an occluder.
-TOUCHING = 1.0
+_TOUCHING = 1.0
 #: Octant completion: each node gets at least this many candidate targets per octant.
 _OCTANT_MIN = 2
 #: ... and at most this many within the candidate radius (the nearest ones).
@@ -356,7 +356,7 @@ class Occlusion:
         # Shadows are cast by touching footprints merged: a block of terraced houses hides
         # what lies behind it (no single house spans a wide enough angle).
         if len(obstacles) > _OCCLUDERS:
-            obstacles = obstacles.merged(min(TOUCHING, safety_margin))
+            obstacles = obstacles.merged(min(_TOUCHING, safety_margin))
         self.occluders = obstacles
         self._verdicts: dict[int, int] = {}  # pair key -> 1 clear, 0 blocked (`verdicts`)
         self.shadow = np.empty((len(nodes), _OCCLUDERS, 4))

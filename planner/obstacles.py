@@ -208,7 +208,7 @@ class Obstacles:
         narrow an angle to hide anything. Walls and polygons apart are kept as they are."""
         solids = self._geometries[: len(self.polygons)]
         first, second = self._tree.query(solids, predicate="dwithin", distance=gap)
-        touching = np.unique(first[first != second])
+        touching = np.unique(first[(first != second) & (second < len(solids))])  # no walls
         if len(touching) == 0:
             return self
         grown = shapely.buffer(solids[touching], gap / 2.0, quad_segs=1)

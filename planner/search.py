@@ -965,12 +965,12 @@ class _Planner:
                 return None
             # Every path shorter than L lies in the ellipse, so it is at least as long as
             # the unconstrained shortest path there (rows, angles and bends ignored).
-            free = float(goal_distance(cache, self.budget)[START])
+            free = self._unconstrained(cache)
             self.lower_bound = max(self.lower_bound, min(free, length))
             if free < length:  # routes shorter than L exist, none valid in the taut graph
                 full = _exact_level(self.problem, self.cache("full"), rows, self.budget, length)
-                if full.path is not None:
-                    return full, self.cache("full"), "full"
+                if full.path is not None:  # certified over this taut ellipse (it holds it)
+                    return full, cache, "full"
                 if full.status in ("cap", "exhausted"):
                     return None  # no walk at all in the full graph: growing L cannot help it
             length *= ELLIPSE_GROWTH
@@ -997,15 +997,22 @@ class _Planner:
         )
         return self._caches[key]
 
+    def _unconstrained(self, cache: EdgeCache) -> float:
+        """The unconstrained shortest path A -> B over the cache's edges (rows, angles and
+        bends ignored): the heuristic's value at A."""
+        return float(goal_distance(cache, self.budget)[START])
+
     def _certify(
         self, taut: _LevelResult, taut_cache: EdgeCache, rows: _RowFilter, level: str
     ) -> tuple[_LevelResult, str, None]:
         """Prove the path found shortest, or find a shorter one (`level`: the graph it came
-        from, taut or, when the taut graph had none, full; "the taut path" below). A valid
-        path as short as the unconstrained shortest path over complete candidate sets (the heuristic's value at A,
-        rows, angles and bends ignored) is the shortest: no valid path can beat it. The taut
-        graph gives that value, with complete candidate sets (inside the ellipse of the taut
-        length when the map is large: unconstrained shortest paths are taut). Otherwise the full graph
+        from, taut or, when the taut graph had none, full; "the taut path" below).
+        `taut_cache` is the taut graph searched: radius-limited, or with complete candidate
+        sets inside an ellipse that holds the path. A valid path as short as the unconstrained
+        shortest path over complete candidate sets (the heuristic's value at A, rows, angles
+        and bends ignored) is the shortest: no valid path can beat it. The taut graph gives
+        that value, with complete candidate sets (inside the ellipse of the taut length when
+        the map is large: unconstrained shortest paths are taut). Otherwise the full graph
         of definition 5 inside the ellipse of the taut length L (`certify_cache`), which holds
         every path shorter than L, is searched for a valid path shorter than L: the one found
         is certified if the search was exhaustive or it meets that value, and if there is
@@ -1017,7 +1024,7 @@ class _Planner:
         if taut_cache.radius is not None:  # complete candidate sets inside the ellipse
             taut_cache = self.certify_cache(length, taut=True)
         if taut_cache is not None:
-            free = float(goal_distance(taut_cache, self.budget)[START])
+            free = self._unconstrained(taut_cache)
             taut.lower_bound = max(self.lower_bound, min(free, length))
             if length <= _at_most(free):
                 taut.certified = True
@@ -1032,7 +1039,7 @@ class _Planner:
         sought = length * (1.0 - self.problem.gap_tolerance) - DISTANCE_TOLERANCE
         full = _exact_level(self.problem, full_cache, rows, self.budget, sought)
         self.budget.proving = False
-        free = float(goal_distance(full_cache, self.budget)[START])
+        free = self._unconstrained(full_cache)
         floor = max(taut.lower_bound, min(free, length), min(self.budget.floor, length))
         if full.path is not None:
             found = _length(full.path)

@@ -457,6 +457,8 @@ class Occlusion:
 class EdgeCache:
     """Obstacle-clear out-edges of graph nodes, computed on demand per spatial tile.
 
+    `to_start` adds the edges into A, which only a search from B back to A uses.
+
     `within` keeps only the nodes inside the ellipse |Av| + |vB| < within, and the edges v->w
     with |Av| + |vw| + |wB| < within (or w->v: edges stay symmetric): every path shorter than
     `within` uses only those, so a
@@ -478,6 +480,7 @@ class EdgeCache:
         local_candidates: int | None = None,
         within: float | None = None,
         occlusion: Occlusion | None = None,
+        to_start: bool = False,
     ) -> None:
         self.problem = problem
         self.nodes = nodes
@@ -497,10 +500,12 @@ class EdgeCache:
             detour = self._to_start + self._to_goal
             member &= (nodes.kind <= KIND_GOAL) | (detour < within + DISTANCE_TOLERANCE)
         self.members = np.flatnonzero(member)
-        self.targets = self.members[self.members != START]
+        # A is no target (a valid walk never comes back to it) but for searches from B.
+        self.targets = self.members if to_start else self.members[self.members != START]
         self.first = np.full(count, -1, np.int64)
         self.count = np.zeros(count, np.int64)
-        self.examined = 0
+        self.examined = 0  # candidate pairs examined
+        self.computed = 0  # nodes whose out-edges are computed
         self.size = 0
         self.src = np.zeros(0, np.int64)
         self.dst = np.zeros(0, np.int64)
@@ -726,6 +731,7 @@ class EdgeCache:
         sources = np.sort(sources)
         src, dst = self._candidate_pairs(sources)
         self.examined += len(src)
+        self.computed += len(sources)
         d = pts[dst] - pts[src]
         length = np.hypot(d[:, 0], d[:, 1])
         keep = length > DISTANCE_TOLERANCE
@@ -742,9 +748,10 @@ class EdgeCache:
             # Before the clearance tests: if v->w is clear, so is its part v->x.
             idx = idx[~_collinear_shadowed(src[idx], dst[idx], d[idx], length[idx], self.radius)]
         idx = idx[~self._occluded(src[idx], dst[idx], d[idx], length[idx])]
-        if self.within is not None and len(idx):  # (radius-limited pairs are short)
-            # Ellipse caches overlap (each growth of L, then certification): a pair tested
-            # by one is not tested again.
+        if (self.within is not None or self.uses_sector_reach) and len(idx):
+            # Long pairs (complete candidate sets; radius-limited pairs are short) go through
+            # the core grid first. Ellipse caches overlap (each growth of L, then
+            # certification): a pair tested by one is not tested again.
             keys = self.occlusion.pair_keys(src[idx], dst[idx])
             known, clear = self.occlusion.verdicts(keys)
             fresh = idx[~known]

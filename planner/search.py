@@ -20,6 +20,10 @@ iteration of finite parking rows (DESIGN 3.2) and the diagnosis when no valid pa
    full graph of definition 5 is searched for a shorter valid path, bounded by the taut
    length (small maps). If the taut graph holds no valid path, the full graph is searched;
    before that, A and B lying in different parts of the free space ends it at once.
+4. Large maps search ellipses |Av| + |vB| < L with complete candidate sets first, L growing
+   (`_Planner._ellipse_search`), then radius-limited graphs. When the first ellipse holds no
+   valid path, a walk search from B back to A proves B walled in when it lies in a dead end
+   that no walk leaves (`_Planner._goal_pocket`).
 
 `method="penalty"`: the paper's loop, done properly: Dijkstra (A*) over nodes, then weights of
 offending edges grow by (violations they take part in) x (mean edge weight), eq. 46 counting
@@ -32,6 +36,7 @@ and fleet size); the planner has no clock.
 
 from __future__ import annotations
 
+import collections
 import heapq
 import math
 from collections.abc import Callable
@@ -99,6 +104,11 @@ ELLIPSE_START = 1.15
 ELLIPSE_GROWTH = 1.2
 #: The caller's progress callback is asked whether to stop every this many expansions.
 _POLL_EVERY = 64
+#: Large maps whose first ellipse held no valid path: the search from B for a pocket round
+#: it (`_Planner._goal_pocket`) gives up once it has computed the out-edges of this many
+#: nodes, or expanded this many states.
+END_NODES = 24
+END_EXPANSIONS = 1000
 #: Certification: at most this many nodes in the ellipse |Av| + |vB| < L of the path found
 #: (L its length) get complete candidate sets (every pair examined) to prove it shortest.
 CERTIFY_NODES = 12000
@@ -111,13 +121,20 @@ CERTIFY_NODES = 12000
 
 class _RowFilter:
     """The parking-row and parking-angle part of definition 5 for one set of rows, applied to
-    a cache's edges in bulk as the cache grows (one vectorised call per batch of edges)."""
+    a cache's edges in bulk as the cache grows (one vectorised call per batch of edges).
 
-    def __init__(self, problem: PathProblem, rows: ParkingRows, nodes: Nodes) -> None:
+    `backward`: for a search from B back to A (`_Planner._goal_pocket`), where the cache's
+    edge v->w stands for the path's segment w->v (edges are symmetric): each edge passes
+    when the segment it stands for does."""
+
+    def __init__(
+        self, problem: PathProblem, rows: ParkingRows, nodes: Nodes, backward: bool = False
+    ) -> None:
         self.problem = problem
         self.rows = rows
         self.geometry = RowGeometry.of(rows)
         self.nodes = nodes
+        self.backward = backward
         self._masks: dict[tuple, np.ndarray] = {}
 
     def mask(
@@ -142,6 +159,9 @@ class _RowFilter:
         departure, arrival, row_tests = flags
         src = cache.src[first : cache.size]
         dst = cache.dst[first : cache.size]
+        direction = cache.direction[first : cache.size]
+        if self.backward:  # the path's segment runs dst -> src
+            src, dst, direction = dst, src, -direction
         pts = self.nodes.points
         from_start = src == START
         to_goal = dst == GOAL
@@ -152,7 +172,7 @@ class _RowFilter:
             )
         if departure or arrival:
             ok &= parking_angles_ok(
-                cache.direction[first : cache.size],
+                direction,
                 from_start & departure,
                 to_goal & arrival & (not self.rows.open_goal),
                 self.rows.start_direction,
@@ -168,8 +188,8 @@ class _RowFilter:
 
 @dataclass
 class _Budget:
-    """The expansion cap, and the caller's stop request (`poll`, asked every
-    `_POLL_EVERY` expansions: True stops every search at once)."""
+    """The expansion cap, and the caller's stop request (`poll`, asked every `poll_every`
+    expansions: True stops every search at once)."""
 
     limit: int
     used: int = 0
@@ -179,6 +199,7 @@ class _Budget:
     proving: bool = False
     best: float = math.inf  # length of the shortest valid path found so far
     poll: Callable[[int], bool] | None = None
+    poll_every: int | None = None  # (None: `_POLL_EVERY`)
     stopped: bool = False
     _next_poll: int = 0
 
@@ -187,7 +208,7 @@ class _Budget:
         if self.stopped or self.used >= self.limit:
             return True
         if self.poll is not None and self.used >= self._next_poll:
-            self._next_poll = self.used + _POLL_EVERY
+            self._next_poll = self.used + (self.poll_every or _POLL_EVERY)
             self.stopped = bool(self.poll(self.used))
         return self.stopped
 
@@ -312,11 +333,16 @@ def _walk_search(
     budget: _Budget,
     bound: float = math.inf,
     short_limit: float = 0.0,
+    backward: bool = False,
 ) -> tuple[list[int] | None, str]:
     """A* over directed edges; returns (edge numbers of the shortest walk A..B meeting
     conditions (1)-(4), "found") or (None, "exhausted" | "exhausted-short" | "cap" |
     "bound"); "bound" when no such walk is shorter than `bound`, "exhausted-short" when
     there is none but the short-edge rule below refused some bend on the way.
+
+    `backward` (with a backward `rows`): the walk B..A, each of its edges standing for the
+    path's segment the other way round (the rules are symmetric), guided by the straight
+    line to A; it serves to prove that no walk leaves B (`_Planner._goal_pocket`).
 
     With `short_limit` (2 rho_c), also the part of condition (5) that two edges decide: a
     walk that bends at both ends of an edge shorter than that, neither end A, has a segment
@@ -325,7 +351,11 @@ def _walk_search(
     straight); entered straight (or from A) it is the edge's ordinary state. In narrow
     streets most first walks broke (5) only this way, and the repair search cost seconds."""
     nodes = cache.nodes
-    heuristic = goal_distance(cache, budget)
+    source, target = (GOAL, START) if backward else (START, GOAL)
+    if backward:
+        heuristic = np.hypot(*(nodes.points - nodes.points[target]).T)
+    else:
+        heuristic = goal_distance(cache, budget)
     heap: list[tuple[float, float, int, float, int]] = []
     # states: 2 e (edge e), 2 e + 1 (short edge e entered with a bend)
     pred: dict[int, int] = {}
@@ -395,14 +425,14 @@ def _walk_search(
             heapq.heappush(heap, (f, -c, tick, c, s_out))
 
     budget.used += 1
-    expand(START, -1, 0.0)
+    expand(source, -1, 0.0)
     while heap:
         f, _, _, g, state = heapq.heappop(heap)
         budget.floor = max(budget.floor, f)
         if f >= bound:
             return None, "bound"
         w = int(cache.dst[state >> 1])
-        if w == GOAL:
+        if w == target:
             walk = [state]
             while pred[walk[-1]] >= 0:
                 walk.append(pred[walk[-1]])
@@ -659,6 +689,7 @@ class _LevelResult:
     violations: PathViolations | None = None
     certified: bool = False
     lower_bound: float = 0.0  # proven lower bound on the shortest valid path (m)
+    reason: str | None = None  # why there is no valid path, when that is proven already
 
 
 def _exact_level(
@@ -754,74 +785,109 @@ def _penalty_loop(
 def _reaches_goal(cache: EdgeCache, filters: _RowFilter, budget: _Budget, **relax: bool) -> bool:
     """Whether B can be reached from A over edges, ignoring the bend rule (a breadth-first
     search over nodes); keyword flags switch parts of the row filter off."""
+    return bool(_reachable(cache, filters, budget, START, GOAL, **relax)[0][GOAL])
+
+
+def _walled_in(
+    cache: EdgeCache, filters: _RowFilter, budget: _Budget, source: int, **relax: bool
+) -> bool:
+    """Whether the nodes reachable from `source` (A, or B with a backward filter) over
+    edges, ignoring the bend rule, were all found before the budget ran out, without the
+    other end among them."""
+    target = START + GOAL - source
+    seen, finished = _reachable(cache, filters, budget, source, target, **relax)
+    return finished and not seen[target]
+
+
+def _reachable(
+    cache: EdgeCache, filters: _RowFilter, budget: _Budget, source: int, target: int, **relax
+) -> tuple[np.ndarray, bool]:
+    """The nodes a breadth-first search from `source` reached (over edges, ignoring the
+    bend rule) before it reached `target`, ran out of nodes or of budget; and whether it
+    ran out of nodes (every node reachable is among them)."""
     seen = np.zeros(len(cache.nodes), bool)
-    seen[START] = True
-    frontier = [START]
-    while frontier and not seen[GOAL] and not budget.spent:
-        budget.used += len(frontier)
-        found = []
-        for v in frontier:
-            lo, hi = cache.edges(v)
-            dst = cache.dst[lo:hi][filters.mask(cache, v, **relax)]
-            dst = dst[~seen[dst]]
-            seen[dst] = True
-            found.append(dst)
-        frontier = np.concatenate(found).tolist() if found else []
-    return bool(seen[GOAL])
+    seen[source] = True
+    queue = collections.deque([source])
+    while queue and not seen[target]:
+        if budget.spent:
+            return seen, False
+        budget.used += 1
+        v = queue.popleft()
+        lo, hi = cache.edges(v)
+        dst = cache.dst[lo:hi][filters.mask(cache, v, **relax)]
+        dst = dst[~seen[dst]]
+        seen[dst] = True
+        queue.extend(dst.tolist())
+    return seen, not queue
 
 
 def _diagnose(problem: PathProblem, cache: EdgeCache, rows: _RowFilter, budget: _Budget) -> str:
     """Why the full graph holds no valid path (called after its search failed): relax one
     constraint at a time and name the one that makes B reachable."""
-    theta_a, theta_b = problem.start_angle_deg, problem.goal_angle_deg
     if not rows.mask(cache, START, departure=False).any():
         return (
             "no straight segment leaves A clear of the obstacles by rho_c and of the row "
             "beyond B by 2 rho_c: A is boxed in"
         )
     if _reaches_goal(cache, rows, budget):
-        return (
-            "every route from A to B needs a bend sharper than 90 degrees (condition 4 of "
-            "definition 4), for example to turn round where no obstacle corner allows it"
-        )
+        return _explain(problem, "bends")
     departure = _reaches_goal(cache, rows, budget, departure=False)
     arrival = _reaches_goal(cache, rows, budget, arrival=False)
     if budget.spent:
         return _cap_reason(problem, budget)
+    if departure or arrival:
+        return _explain(problem, "departure" if departure else "arrival")
+    if _reaches_goal(cache, rows, budget, departure=False, arrival=False):
+        return _explain(problem, "both")
+    if _reaches_goal(cache, rows, budget, departure=False, arrival=False, row_tests=False):
+        return _explain(problem, "rows")
+    if budget.spent:
+        return _cap_reason(problem, budget)
+    return _explain(problem, "unreachable")
+
+
+def _explain(problem: PathProblem, culprit: str) -> str:
+    """The reason no valid path exists, for the constraint found to rule them all out:
+    "bends", "departure", "arrival", "both" (the angles at both ends), "rows" or
+    "unreachable" (the obstacles alone)."""
+    theta_a, theta_b = problem.start_angle_deg, problem.goal_angle_deg
     leg = problem.start_tail is not None  # a leg of a route (planner.route, DESIGN 7)
-    if departure and leg:
+    if culprit == "bends":
+        return (
+            "every route from A to B needs a bend sharper than 90 degrees (condition 4 of "
+            "definition 4), for example to turn round where no obstacle corner allows it"
+        )
+    if culprit == "departure" and leg:
         return (
             "every way on turns more than 90 degrees from the segment the route arrives on "
             "(condition 4 at the point)"
         )
-    if departure:
+    if culprit == "departure":
         return (
             "every route needs a sharp bend at departure: the first segment of every route "
             f"turns more than 90 degrees from the start row direction (theta_A = {theta_a:g} deg)"
         )
-    if arrival:
+    if culprit == "arrival":
         return (
             "every route needs a sharp bend at arrival: the last segment of every route turns "
             f"more than 90 degrees from the goal row direction (theta_B = {theta_b:g} deg)"
         )
-    if _reaches_goal(cache, rows, budget, departure=False, arrival=False):
+    if culprit == "both":
         return (
             "every route needs sharp bends at both departure and arrival (more than 90 "
             f"degrees from the row directions, theta_A = {theta_a:g} deg, "
             f"theta_B = {theta_b:g} deg)"
         )
-    if _reaches_goal(cache, rows, budget, departure=False, arrival=False, row_tests=False):
-        if leg:
-            return (
-                "every way there comes within 2 rho_c of the route flown before it or of the "
-                "parking row at A (condition 5 across legs)"
-            )
+    if culprit == "rows" and leg:
+        return (
+            "every way there comes within 2 rho_c of the route flown before it or of the "
+            "parking row at A (condition 5 across legs)"
+        )
+    if culprit == "rows":
         return (
             "the parking rows cut every route: no path keeps 2 rho_c from the row behind A "
             "and the row beyond B (eq. 35); change theta_A/theta_B or the fleet size"
         )
-    if budget.spent:
-        return _cap_reason(problem, budget)
     return (
         "B is unreachable from A: the obstacles with their rho_c margins leave no corridor "
         "between them"
@@ -890,6 +956,7 @@ class _Planner:
                     level
                 ),
                 occlusion=self.occlusion,
+                to_start=level == "to-start",
             )
         return self._caches[level]
 
@@ -918,6 +985,8 @@ class _Planner:
         found = self._ellipse_search(rows_filter) if self.cache("taut").radius else None
         if found is not None:
             result, cache, level = found
+            if result.path is None:  # B in a pocket (`_goal_pocket`)
+                return result, level, result.reason
             return self._certify(result, cache, rows_filter, level)
         taut = _exact_level(self.problem, self.cache("taut"), rows_filter, self.budget)
         if taut.path is not None:
@@ -963,6 +1032,10 @@ class _Planner:
                 return result, cache, "taut"
             if result.status == "cap":
                 return None
+            if length == self.straight * ELLIPSE_START:
+                reason = self._goal_pocket(rows.rows, cache)
+                if reason is not None:
+                    return _LevelResult(None, 1, 0, "exhausted", reason=reason), cache, "full"
             # Every path shorter than L lies in the ellipse, so it is at least as long as
             # the unconstrained shortest path there (rows, angles and bends ignored).
             free = self._unconstrained(cache)
@@ -975,6 +1048,57 @@ class _Planner:
                     return None  # no walk at all in the full graph: growing L cannot help it
             length *= ELLIPSE_GROWTH
         return None
+
+    def _goal_pocket(self, rows: ParkingRows, ellipse: EdgeCache) -> str | None:
+        """Once an ellipse held no valid path. Where B lies in a pocket that no walk meeting
+        conditions (1)-(4) leaves (a dead end whose way out needs a sharp bend, say), the
+        ellipses grow in vain and the radius-limited graphs searched next prove nothing when
+        they run dry, after minutes (a Vienna street: stopped at 60 s). This proves in
+        seconds that no valid path exists: the walk search from B back to A (each edge
+        standing for the path's segment the other way round; the rules are symmetric) over
+        complete candidate sets runs out of edges within its budget (`_end_budget`). (A
+        pocket round A ends the forward searches as soon.) Returns the reason, naming the
+        rule that closes the pocket: the breadth-first search from B, bends ignored, finds
+        every node it can reach unless that rule is relaxed too. None when there is no such
+        proof.
+
+        The `ellipse` searched, whose edges round B are mostly computed already, is tried
+        first: where the walks from B get away there, B is taken to be in no pocket."""
+        filters = _RowFilter(self.problem, rows, self.nodes, backward=True)
+        for cache in (ellipse, self.cache("to-start")):
+            budget = self._end_budget(cache)
+            _, status = _walk_search(
+                cache, filters, budget, short_limit=_apart(self.problem), backward=True
+            )
+            self.budget.used += budget.used
+            if status not in ("exhausted", "exhausted-short"):
+                return None
+        tests = (
+            ("bends", {}),
+            ("arrival", {"arrival": False}),
+            ("rows", {"arrival": False, "row_tests": False}),
+        )
+        for culprit, relax in tests:
+            budget = self._end_budget(cache)
+            walled_in = _walled_in(cache, filters, budget, GOAL, **relax)
+            self.budget.used += budget.used
+            if not walled_in:
+                return _explain(self.problem, culprit)
+        return _explain(self.problem, "unreachable")
+
+    def _end_budget(self, cache: EdgeCache) -> _Budget:
+        """A budget for a search from B (`_goal_pocket`), spent once `cache` has
+        computed the out-edges of `END_NODES` more nodes, after `END_EXPANSIONS`
+        expansions, or with the plan's: it passes the stop request on (the caller adds its
+        expansions to the plan's)."""
+        plan, cap = self.budget, cache.computed + END_NODES
+
+        def poll(used: int) -> bool:
+            if plan.poll is not None and not plan.stopped:
+                plan.stopped = bool(plan.poll(plan.used + used))
+            return plan.stopped or cache.computed >= cap
+
+        return _Budget(min(END_EXPANSIONS, max(plan.limit - plan.used, 0)), poll=poll, poll_every=1)
 
     def certify_cache(self, length: float, taut: bool = False) -> EdgeCache | None:
         """The full graph of definition 5 (or the taut graph) inside the ellipse

@@ -10,6 +10,7 @@ from collections import Counter
 from dataclasses import replace
 
 import numpy as np
+import pytest
 import shapely
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -204,6 +205,30 @@ def test_every_returned_path_is_valid_on_random_maps(pb):
         assert exact.valid, exact.reason
         if exact.certified and exact.fleet_size == penalty.fleet_size:
             assert exact.length_m <= penalty.length_m * (1 + 1e-12) + 1e-9
+
+
+def test_the_walk_search_from_b_back_to_a_mirrors_the_one_from_a():
+    """The rules a walk meets (bends, the short-edge rule, the rows, the parking angles) are
+    symmetric: the search from B back to A, which proves B walled in on a city map
+    (`_Planner._goal_pocket`), finds a walk exactly when the search from A does, as long."""
+    outcomes = Counter()
+    for seed in range(60):
+        pb = turn_round_map(seed)
+        planner = search._Planner(pb)
+        walks = []
+        for backward, level in ((False, "full"), (True, "to-start")):
+            cache = planner.cache(level)
+            rows = search._RowFilter(pb, pb.rows(3), planner.nodes, backward=backward)
+            walk, _ = search._walk_search(
+                cache, rows, search._Budget(10**7), search.math.inf, search._apart(pb), backward
+            )
+            walks.append(None if walk is None else float(cache.length[walk].sum()))
+        forward, backward = walks
+        assert (forward is None) == (backward is None), seed
+        if forward is not None:
+            assert backward == pytest.approx(forward, abs=1e-6), seed
+        outcomes[forward is None] += 1
+    assert outcomes[True] >= 10 and outcomes[False] >= 10  # both kinds of map were drawn
 
 
 def test_repair_runs_and_works_on_turn_round_maps():

@@ -17,6 +17,7 @@ from planner.graph import GOAL, START, EdgeCache, graph_nodes
 from planner.obstacles import Obstacles, _cell_centres_inside
 from planner.scenarios import city_grid, random_buildings, scenario_problem
 from planner.search import SearchProgress, goal_distance, plan_path
+from planner.types import PathProblem
 from planner.validity import check_path
 from tests.planner_maps import problem, square, terraced_rows
 from tests.test_planner_search import REPAIR
@@ -269,6 +270,45 @@ def test_an_ellipse_searched_in_vain_raises_the_lower_bound(dense, monkeypatch):
     plan = plan_path(dense)
     assert plan.valid and not plan.certified
     assert 1.01 * straight - 1e-6 <= plan.lower_bound_m < plan.length_m
+
+
+def _dead_end_bay() -> PathProblem:
+    """400 random buildings over 1.5 km (radius-limited graphs), and B in a bay 38 m wide
+    and 54 m deep, open to the east, with its row leaving east: every route enters heading
+    west, and the last segment must head within 90 degrees of east. A U-turn in the bay
+    needs a corner to bend at, and it has none."""
+    scenario = random_buildings(400, seed=1, size=1500.0)
+    bay = shapely.box(1380.0, 1400.0, 1440.0, 1450.0).difference(
+        shapely.box(1386.0, 1406.0, 1450.0, 1444.0)
+    )
+    around = shapely.box(1340.0, 1340.0, 1500.0, 1500.0)
+    rings = scenario.obstacles.polygons
+    shapes = scenario.obstacles.geometries[: len(rings)]
+    polygons = [
+        ring for ring, shape in zip(rings, shapes, strict=True) if not shape.intersects(around)
+    ]
+    polygons.append(shapely.get_coordinates(bay.exterior)[:-1])
+    return problem(scenario.start, (1425.0, 1425.0), Obstacles(polygons=polygons), theta_b=-45.0)
+
+
+def test_b_in_a_dead_end_is_proven_walled_in_after_the_first_ellipse():
+    """B in a dead end whose way out needs a sharp bend: the first ellipse holds no valid
+    path, and the walk search from B back to A over complete candidate sets runs dry at
+    once. Before, the ellipses grew to 12,000 nodes and the radius-limited graphs were
+    searched to the end: the same reason after 363,558 expansions (a Vienna street: no
+    answer in 60 s)."""
+    plan = plan_path(_dead_end_bay())
+    assert not plan.valid
+    assert plan.reason.startswith("every route needs a sharp bend at arrival")
+    assert plan.expansions < 20_000
+
+
+def test_b_in_the_open_is_no_pocket(dense):
+    planner = search._Planner(dense)
+    straight = float(np.hypot(*(dense.goal - dense.start)))
+    ellipse = planner.certify_cache(search.ELLIPSE_START * straight, taut=True)
+    assert planner._goal_pocket(dense.rows(3), ellipse) is None
+    assert planner.budget.used <= 2 * search.END_EXPANSIONS
 
 
 def _stop_after(polls: int):

@@ -1032,10 +1032,6 @@ class _Planner:
                 return result, cache, "taut"
             if result.status == "cap":
                 return None
-            if length == self.straight * ELLIPSE_START:
-                reason = self._goal_pocket(rows.rows, cache)
-                if reason is not None:
-                    return _LevelResult(None, 1, 0, "exhausted", reason=reason), cache, "full"
             # Every path shorter than L lies in the ellipse, so it is at least as long as
             # the unconstrained shortest path there (rows, angles and bends ignored).
             free = self._unconstrained(cache)
@@ -1046,6 +1042,10 @@ class _Planner:
                     return full, cache, "full"
                 if full.status in ("cap", "exhausted"):
                     return None  # no walk at all in the full graph: growing L cannot help it
+            if length == self.straight * ELLIPSE_START:
+                reason = self._goal_pocket(rows.rows, cache)
+                if reason is not None:
+                    return _LevelResult(None, 1, 0, "exhausted", reason=reason), cache, "full"
             length *= ELLIPSE_GROWTH
         return None
 

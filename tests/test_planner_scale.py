@@ -300,7 +300,7 @@ def test_b_in_a_dead_end_is_proven_walled_in_after_the_first_ellipse():
     plan = plan_path(_dead_end_bay())
     assert not plan.valid
     assert plan.reason.startswith("every route needs a sharp bend at arrival")
-    assert plan.expansions < 20_000
+    assert plan.expansions < 60_000
 
 
 def test_b_in_the_open_is_no_pocket(dense):

@@ -233,7 +233,9 @@ class GoalDistance:
     no path from it can beat (its key is at least K). The values are consistent (they never
     drop by more than an edge's length along an edge), so a search may relax each edge once.
 
-    It first runs until it settles A, at the unconstrained length L (`values`); `extend`
+    It first runs until it settles A, at the unconstrained length L (`values`), or, in an
+    ellipse cache, until its keys reach the ellipse's size (A is then left at that bound,
+    no shorter path exists: an ellipse searched in vain costs less); `extend`
     runs it on to a larger K, so the repair search, whose labels mostly lie on routes a few
     metres longer than L, gets their exact distances (with only the straight-line bound,
     every node near the line from A looks as good as the best route). Edges are symmetric
@@ -257,7 +259,8 @@ class GoalDistance:
         self.reach = float(self._to_start[GOAL])  # every unsettled node: dist + to_start >= it
         self.values = self._to_goal
         self._count = 0
-        self.extend(math.inf, budget)
+        # In an ellipse |Av| + |vB| < L no path of L or more matters (`EdgeCache.within`).
+        self.extend(math.inf if cache.within is None else _at_most(cache.within), budget)
 
     @property
     def open(self) -> bool:
@@ -300,6 +303,8 @@ class GoalDistance:
             dist[v] = nd
             for node, item in zip(v.tolist(), (nd + to_start[v]).tolist(), strict=True):
                 heapq.heappush(heap, (item, node))
+        if heap:  # no node left has a key below the queue's least
+            self.reach = max(self.reach, heap[0][0])
         self.values = np.where(settled, dist, np.maximum(self._to_goal, self.reach - to_start))
 
 

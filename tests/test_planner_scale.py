@@ -72,6 +72,29 @@ def test_goal_distance_run_on_settles_every_node_below_the_key_and_stays_a_lower
     assert np.all(h[cache.src[:size]] <= cache.length[:size] + h[cache.dst[:size]] + 1e-6)
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_an_ellipse_too_small_for_any_path_stops_the_reverse_search_at_its_size(seed):
+    """Inside an ellipse |Av| + |vB| < L with no path as short as L, the heuristic's reverse
+    search stops once its keys reach L instead of settling A: A keeps the bound L (what
+    the ellipse search needs to know), and every value stays a lower bound."""
+    prob = scenario_problem(random_buildings(40, seed=seed, size=800.0))
+    nodes = graph_nodes(prob)
+    straight = float(np.hypot(*(prob.goal - prob.start)))
+    wide = EdgeCache(prob, nodes, taut=True, prune_collinear=True, within=3.0 * straight)
+    shortest = goal_distance(wide, search._Budget(10**9))[START]
+    size = shortest - 1.0  # no path is this short
+    cache = EdgeCache(prob, nodes, taut=True, prune_collinear=True, within=size)
+    goal = search.heuristic_of(cache, search._Budget(10**9))
+    h = goal.values
+    exact = _complete_graph_distances(cache)
+    reached = np.array(sorted(exact))
+    distance = np.array([exact[v] for v in reached])
+    key = distance + np.hypot(*(nodes.points[reached] - prob.start).T)
+    assert goal.settled <= np.count_nonzero(key < size + 1e-6)  # A (key >= L) not settled
+    assert h[START] >= size  # ... but bounded by L
+    assert np.all(h[reached] <= distance + 1e-6)
+
+
 def test_b_sees_every_node_that_sees_it_on_a_radius_limited_map():
     """The heuristic's backward search follows B's out-edges: B's candidates are complete
     (like A's). B in open country far from the district, where only the nearest targets of

@@ -930,8 +930,7 @@ class _Planner:
     ) -> None:
         self.problem = problem
         self.straight = float(np.hypot(*(problem.goal - problem.start)))
-        #: Proven lower bound on every valid path (m): the straight line, raised by the
-        #: ellipses searched in vain (`_ellipse_search`).
+        #: Proven lower bound on every valid path (m): the straight line.
         self.lower_bound = self.straight
         poll = None
         if progress is not None:
@@ -989,13 +988,13 @@ class _Planner:
             return result, "penalty", self._why(result, rows_filter, "penalty")
         found = self._ellipse_search(rows_filter) if self.cache("taut").radius else None
         if found is not None:
-            result, cache, level = found
+            result, level = found
             if result.path is None:  # B in a pocket (`_goal_pocket`)
                 return result, level, result.reason
-            return self._certify(result, cache, rows_filter, level)
+            return self._certify(result, rows_filter, level)
         taut = _exact_level(self.problem, self.cache("taut"), rows_filter, self.budget)
         if taut.path is not None:
-            return self._certify(taut, self.cache("taut"), rows_filter, "taut")
+            return self._certify(taut, rows_filter, "taut")
         problem = self.problem
         if taut.status == "exhausted" and problem.obstacles.separated(
             problem.start, problem.goal, problem.safety_margin - DISTANCE_TOLERANCE
@@ -1012,7 +1011,7 @@ class _Planner:
             taut = full
         return taut, "full", self._why(taut, rows_filter, "full")
 
-    def _ellipse_search(self, rows: _RowFilter) -> tuple[_LevelResult, EdgeCache, str] | None:
+    def _ellipse_search(self, rows: _RowFilter) -> tuple[_LevelResult, str] | None:
         """On a map too large for complete candidate sets: the taut graph with every pair
         examined inside the ellipse |Av| + |vB| < L, searched for a valid path shorter than L,
         L from `ELLIPSE_START` x |AB| growing by `ELLIPSE_GROWTH` until one is found. None when
@@ -1026,7 +1025,8 @@ class _Planner:
         have (a Vienna street: no taut walk at all, 47 s spent growing the ellipse and
         exhausting the taut graph before the full graph's 0.6 s search found the path).
         `_certify` then proves the path found, or finds a shorter one, as for a taut path.
-        Each L searched in vain raises `lower_bound`."""
+        After the first L searched in vain, B may be proven walled in (`_goal_pocket`): the
+        result then has no path, and its reason."""
         length = self.straight * ELLIPSE_START
         while not self.budget.spent:
             cache = self.certify_cache(length, taut=True)
@@ -1034,23 +1034,22 @@ class _Planner:
                 return None
             result = _exact_level(self.problem, cache, rows, self.budget, length)
             if result.path is not None:
-                return result, cache, "taut"
+                return result, "taut"
             if result.status == "cap":
                 return None
-            # Every path shorter than L lies in the ellipse, so it is at least as long as
-            # the unconstrained shortest path there (rows, angles and bends ignored).
+            # Routes shorter than L over the taut graph, rows, angles and bends ignored (the
+            # full graph may have shorter ones: this only decides where to look next).
             free = self._unconstrained(cache)
-            self.lower_bound = max(self.lower_bound, min(free, length))
             if free < length:  # routes shorter than L exist, none valid in the taut graph
                 full = _exact_level(self.problem, self.cache("full"), rows, self.budget, length)
-                if full.path is not None:  # certified over this taut ellipse (it holds it)
-                    return full, cache, "full"
+                if full.path is not None:
+                    return full, "full"
                 if full.status in ("cap", "exhausted"):
                     return None  # no walk at all in the full graph: growing L cannot help it
             if length == self.straight * ELLIPSE_START:
                 reason = self._goal_pocket(rows.rows, cache)
                 if reason is not None:
-                    return _LevelResult(None, 1, 0, "exhausted", reason=reason), cache, "full"
+                    return _LevelResult(None, 1, 0, "exhausted", reason=reason), "full"
             length *= ELLIPSE_GROWTH
         return None
 
@@ -1132,53 +1131,55 @@ class _Planner:
         return float(goal_distance(cache, self.budget)[START])
 
     def _certify(
-        self, taut: _LevelResult, taut_cache: EdgeCache, rows: _RowFilter, level: str
+        self, taut: _LevelResult, rows: _RowFilter, level: str
     ) -> tuple[_LevelResult, str, None]:
         """Prove the path found shortest, or find a shorter one (`level`: the graph it came
-        from, taut or, when the taut graph had none, full; "the taut path" below).
-        `taut_cache` is the taut graph searched: radius-limited, or with complete candidate
-        sets inside an ellipse that holds the path. A valid path as short as the unconstrained
-        shortest path over complete candidate sets (the heuristic's value at A, rows, angles
-        and bends ignored) is the shortest: no valid path can beat it. The taut graph gives
-        that value, with complete candidate sets (inside the ellipse of the taut length when
-        the map is large: unconstrained shortest paths are taut). Otherwise the full graph
-        of definition 5 inside the ellipse of the taut length L (`certify_cache`), which holds
-        every path shorter than L, is searched for a valid path shorter than L: the one found
-        is certified if the search was exhaustive or it meets that value, and if there is
-        none the taut path is. A search cut short (cap or stop request) leaves the best
-        proven lower bound: that value, or the last f the bounded search reached."""
+        from, taut or, when the taut graph had none, full; "the taut path" below). The full graph of definition 5 inside the ellipse of the
+        taut length L (`certify_cache`, complete candidate sets) holds every path shorter than
+        L. A valid path as short as the unconstrained shortest path there (the heuristic's
+        value at A, rows, angles and bends ignored) is the shortest: no valid path can beat
+        it. Otherwise that graph is searched for a valid path shorter than L: the one found is
+        certified if the search was exhaustive or it meets that value, and if there is none
+        the taut path is. A search cut short (cap or stop request) leaves the best proven
+        lower bound: that value, or the last f the bounded search reached.
+
+        The taut graph's own unconstrained length is no such bound: the full graph's
+        shortest path can bend at nodes the taut graph leaves out or may not bend at (a
+        node between two footprints, on the margin of one; random maps: up to 29 m shorter),
+        so it is never used to certify."""
         length = _length(taut.path)
         self.budget.best = min(self.budget.best, length)
         taut.lower_bound = self.lower_bound
-        if taut_cache.radius is not None:  # complete candidate sets inside the ellipse
-            taut_cache = self.certify_cache(length, taut=True)
-        if taut_cache is not None:
-            free = self._unconstrained(taut_cache)
-            taut.lower_bound = max(self.lower_bound, min(free, length))
-            if length <= _at_most(free):
-                taut.certified = True
-                return taut, level, None
-        if self.budget.spent or within_gap(length, taut.lower_bound, self.problem.gap_tolerance):
+        gap = self.problem.gap_tolerance
+        if length <= _at_most(self.lower_bound):  # as short as the straight line
+            taut.certified = True
+            return taut, level, None
+        if self.budget.spent or within_gap(length, taut.lower_bound, gap):
             return taut, level, None
         full_cache = self.certify_cache(length)
         if full_cache is None:
             return taut, level, None
+        free = self._unconstrained(full_cache)
+        taut.lower_bound = max(self.lower_bound, min(free, length))
+        if length <= _at_most(free):
+            taut.certified = True
+            taut.lower_bound = length
+            return taut, level, None
+        if self.budget.spent or within_gap(length, taut.lower_bound, gap):
+            return taut, level, None
         self.budget.floor, self.budget.proving = 0.0, True
         # Only a path shorter by more than the gap tolerance would matter.
-        sought = length * (1.0 - self.problem.gap_tolerance) - DISTANCE_TOLERANCE
+        sought = length * (1.0 - gap) - DISTANCE_TOLERANCE
         full = _exact_level(self.problem, full_cache, rows, self.budget, sought)
         self.budget.proving = False
-        free = self._unconstrained(full_cache)
-        floor = max(taut.lower_bound, min(free, length), min(self.budget.floor, length))
+        floor = max(taut.lower_bound, min(self.budget.floor, length))
         if full.path is not None:
             found = _length(full.path)
             full.certified = full.status == "found" or found <= _at_most(free)
             full.lower_bound = found if full.certified else min(floor, found)
             return full, "full", None
         exhaustive = full.status in ("bound", "exhausted", "repair")
-        taut.certified = length <= _at_most(free) or (
-            exhaustive and self.problem.gap_tolerance == 0.0
-        )
+        taut.certified = exhaustive and gap == 0.0
         if taut.certified:
             taut.lower_bound = length
         else:

@@ -31,6 +31,7 @@ from planner.scenarios import (
     paper_scenario,
     random_buildings,
     scenario_problem,
+    walled_in,
 )
 from planner.search import plan_path
 from planner.types import PathPlan
@@ -83,27 +84,15 @@ def _timed(scenario: Scenario, runs: int, **overrides) -> tuple[PathPlan, float,
     return plan, wall, cpu
 
 
-def _walled_in(base: Scenario, half: float, gap: float = 0.0) -> Scenario:
-    """`base` with a square of walls round B, open at the corner the goal row leaves
-    through when `gap` > 0. No valid path either way: closed, B is cut off; open, every way
-    in reaches B against its row (a sharp arrival)."""
-    c = base.goal
-    d = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]) * half + c
-    walls = [[d[0], d[1]], [d[3], d[0]]]  # south and west sides
-    walls += [[d[1], d[2] - [0.0, gap]], [d[2] - [gap, 0.0], d[3]]]  # east, north (gap at NE)
-    obstacles = Obstacles(polygons=base.obstacles.polygons, walls=np.array(walls))
-    return replace(base, name=f"{base.name}, B walled in", obstacles=obstacles)
-
-
 CASES: list[tuple[str, Callable[[], Scenario], int, dict]] = [
     ("paper Table II (seed 25)", paper_scenario, 5, {}),
     ("paper Table II, method=penalty", paper_scenario, 5, {"method": "penalty"}),
-    ("paper, B walled in (no path)", lambda: _walled_in(paper_scenario(), 80.0), 3, {}),
+    ("paper, B walled in (no path)", lambda: walled_in(paper_scenario(), 80.0), 3, {}),
     ("200 random buildings", lambda: random_buildings(200), 3, {}),
     ("200 buildings, theta_B = 90", lambda: random_buildings(200), 1, {"goal_angle_deg": 90.0}),
     (
         "200 buildings, B in a box open on its row",
-        lambda: _walled_in(random_buildings(200), 40.0, gap=25.0),
+        lambda: walled_in(random_buildings(200), 40.0, gap=25.0),
         1,
         {},
     ),

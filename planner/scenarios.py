@@ -16,7 +16,7 @@ metre, so that every scenario passes eqs. 14-15 for any fleet size and either pa
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import shapely
@@ -205,6 +205,18 @@ def city_grid(
         radio_range,
         (0.0, 0.0, width, height),
     )
+
+
+def walled_in(base: Scenario, half: float, gap: float = 0.0) -> Scenario:
+    """`base` with a square of walls `half` x 2 wide round B, open at the corner the goal row
+    leaves through when `gap` > 0. No valid path either way: closed, B is cut off; open,
+    every way in reaches B against its row (a sharp arrival)."""
+    c = base.goal
+    d = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]) * half + c
+    walls = [[d[0], d[1]], [d[3], d[0]]]  # south and west sides
+    walls += [[d[1], d[2] - [0.0, gap]], [d[2] - [gap, 0.0], d[3]]]  # east, north (gap at NE)
+    obstacles = Obstacles(polygons=base.obstacles.polygons, walls=np.array(walls))
+    return replace(base, name=f"{base.name}, B walled in", obstacles=obstacles)
 
 
 def scenario_problem(scenario: Scenario, **overrides):

@@ -1000,6 +1000,10 @@ class _Planner:
             problem.start, problem.goal, problem.safety_margin - DISTANCE_TOLERANCE
         ):
             return taut, "full", _SEPARATED
+        if taut.status == "exhausted" and self.cache("full").radius is not None:
+            reason = self._goal_pocket(rows, self.cache("taut"))
+            if reason is not None:
+                return taut, "full", reason
         if taut.status != "cap":
             full = _exact_level(
                 self.problem, self.cache("full"), rows_filter, self.budget, explain=True
@@ -1053,23 +1057,24 @@ class _Planner:
             length *= ELLIPSE_GROWTH
         return None
 
-    def _goal_pocket(self, rows: ParkingRows, ellipse: EdgeCache) -> str | None:
-        """Once an ellipse held no valid path. Where B lies in a pocket that no walk meeting
-        conditions (1)-(4) leaves (a dead end whose way out needs a sharp bend, say), the
-        ellipses grow in vain and the radius-limited graphs searched next prove nothing when
-        they run dry, after minutes (a Vienna street: stopped at 60 s). This proves in
-        seconds that no valid path exists: the walk search from B back to A (each edge
-        standing for the path's segment the other way round; the rules are symmetric) over
-        complete candidate sets runs out of edges within its budget (`_end_budget`). (A
-        pocket round A ends the forward searches as soon.) Returns the reason, naming the
-        rule that closes the pocket: the breadth-first search from B, bends ignored, finds
-        every node it can reach unless that rule is relaxed too. None when there is no such
-        proof.
+    def _goal_pocket(self, rows: ParkingRows, gate: EdgeCache) -> str | None:
+        """Where B lies in a pocket that no walk meeting conditions (1)-(4) leaves (a dead end
+        whose way out needs a sharp bend, say), a large map's ellipses grow in vain and the
+        radius-limited graphs searched next prove nothing when they run dry, after minutes
+        (a Vienna street: stopped at 60 s). This proves in seconds that no valid path
+        exists: the walk search from B back to A (each edge standing for the path's segment
+        the other way round; the rules are symmetric) over complete candidate sets runs out
+        of edges within its budget (`_end_budget`). (A pocket round A ends the forward
+        searches as soon.) Returns the reason, naming the rule that closes the pocket: the
+        breadth-first search from B, bends ignored, finds every node it can reach unless
+        that rule is relaxed too. None when there is no such proof.
 
-        The `ellipse` searched, whose edges round B are mostly computed already, is tried
-        first: where the walks from B get away there, B is taken to be in no pocket."""
+        It runs after the first ellipse searched in vain, and when the taut graph has no
+        walk at all but the full graph would be radius-limited. The graph just searched
+        (`gate`), whose edges round B are mostly computed already, is tried first: where the
+        walks from B get away there, B is taken to be in no pocket."""
         filters = _RowFilter(self.problem, rows, self.nodes, backward=True)
-        for cache in (ellipse, self.cache("to-start")):
+        for cache in (gate, self.cache("to-start")):
             budget = self._end_budget(cache)
             _, status = _walk_search(
                 cache, filters, budget, short_limit=_apart(self.problem), backward=True

@@ -15,7 +15,7 @@ import planner.graph as graph
 import planner.search as search
 from planner.graph import GOAL, START, EdgeCache, graph_nodes
 from planner.obstacles import Obstacles, _cell_centres_inside
-from planner.scenarios import city_grid, random_buildings, scenario_problem
+from planner.scenarios import city_grid, random_buildings, scenario_problem, walled_in
 from planner.search import SearchProgress, goal_distance, plan_path
 from planner.types import PathProblem
 from planner.validity import check_path
@@ -329,6 +329,18 @@ def test_b_in_a_dead_end_is_proven_walled_in_after_the_first_ellipse():
     assert not plan.valid
     assert plan.reason.startswith("every route needs a sharp bend at arrival")
     assert plan.expansions < 60_000
+
+
+def test_b_in_a_box_is_proven_walled_in_when_the_full_graph_is_radius_limited():
+    """A map whose taut graph has complete candidate sets and whose full graph does not: when
+    the taut graph has no walk, the search from B back to A over complete candidate sets
+    proves B walled in, where the radius-limited full graph, searched to the end (61,428
+    expansions), proved nothing: it lacks the long edges."""
+    prob = scenario_problem(walled_in(random_buildings(200), 40.0, gap=25.0))
+    plan = plan_path(prob)
+    assert not plan.valid
+    assert plan.reason.startswith("every route from A to B needs a bend sharper than 90")
+    assert plan.expansions < 10_000
 
 
 def test_b_in_the_open_is_no_pocket(dense):

@@ -23,7 +23,7 @@ iteration of finite parking rows (DESIGN 3.2) and the diagnosis when no valid pa
 4. Large maps search ellipses |Av| + |vB| < L with complete candidate sets first, L growing
    (`_Planner._ellipse_search`), then radius-limited graphs. When the first ellipse holds no
    valid path, a walk search from B back to A proves B walled in when it lies in a dead end
-   that no walk leaves (`_Planner._goal_pocket`).
+   that no walk leaves (`_Planner._pocket`; A's too when the radius-limited graphs run dry).
 
 `method="penalty"`: the paper's loop, done properly: Dijkstra (A*) over nodes, then weights of
 offending edges grow by (violations they take part in) x (mean edge weight), eq. 46 counting
@@ -105,7 +105,7 @@ ELLIPSE_GROWTH = 1.2
 #: The caller's progress callback is asked whether to stop every this many expansions.
 _POLL_EVERY = 64
 #: Large maps whose first ellipse held no valid path: the search from B for a pocket round
-#: it (`_Planner._goal_pocket`) gives up once it has computed the out-edges of this many
+#: it (`_Planner._pocket`) gives up once it has computed the out-edges of this many
 #: nodes, or expanded this many states.
 END_NODES = 24
 END_EXPANSIONS = 1000
@@ -123,7 +123,7 @@ class _RowFilter:
     """The parking-row and parking-angle part of definition 5 for one set of rows, applied to
     a cache's edges in bulk as the cache grows (one vectorised call per batch of edges).
 
-    `backward`: for a search from B back to A (`_Planner._goal_pocket`), where the cache's
+    `backward`: for a search from B back to A (`_Planner._pocket`), where the cache's
     edge v->w stands for the path's segment w->v (edges are symmetric): each edge passes
     when the segment it stands for does."""
 
@@ -339,6 +339,7 @@ def _walk_search(
     bound: float = math.inf,
     short_limit: float = 0.0,
     backward: bool = False,
+    straight_line: bool = False,
 ) -> tuple[list[int] | None, str]:
     """A* over directed edges; returns (edge numbers of the shortest walk A..B meeting
     conditions (1)-(4), "found") or (None, "exhausted" | "exhausted-short" | "cap" |
@@ -346,8 +347,9 @@ def _walk_search(
     there is none but the short-edge rule below refused some bend on the way.
 
     `backward` (with a backward `rows`): the walk B..A, each of its edges standing for the
-    path's segment the other way round (the rules are symmetric), guided by the straight
-    line to A; it serves to prove that no walk leaves B (`_Planner._goal_pocket`).
+    path's segment the other way round (the rules are symmetric). `straight_line` (implied
+    by `backward`): guided by the straight line to the far end, not `GoalDistance`. Both
+    serve to prove that no walk leaves an end (`_Planner._pocket`).
 
     With `short_limit` (2 rho_c), also the part of condition (5) that two edges decide: a
     walk that bends at both ends of an edge shorter than that, neither end A, has a segment
@@ -357,7 +359,7 @@ def _walk_search(
     streets most first walks broke (5) only this way, and the repair search cost seconds."""
     nodes = cache.nodes
     source, target = (GOAL, START) if backward else (START, GOAL)
-    if backward:
+    if backward or straight_line:
         heuristic = np.hypot(*(nodes.points - nodes.points[target]).T)
     else:
         heuristic = goal_distance(cache, budget)
@@ -899,6 +901,13 @@ def _explain(problem: PathProblem, culprit: str) -> str:
     )
 
 
+#: Appended to a reason found on radius-limited graphs: they lack the longer edges, so
+#: running dry proves nothing (`_Planner._pocket` proves the common case, an end in a pocket).
+_RADIUS_LIMITED = (
+    "(so the graph limited to each node's neighbourhood shows, on a map too large to examine "
+    "every pair of nodes: not proven)"
+)
+
 _SEPARATED = (
     "B is unreachable from A: the obstacles with their rho_c margins wall one of them in "
     "(A and B lie in different parts of the free space)"
@@ -989,7 +998,7 @@ class _Planner:
         found = self._ellipse_search(rows_filter) if self.cache("taut").radius else None
         if found is not None:
             result, level = found
-            if result.path is None:  # B in a pocket (`_goal_pocket`)
+            if result.path is None:  # B in a pocket (`_pocket`)
                 return result, level, result.reason
             return self._certify(result, rows_filter, level)
         taut = _exact_level(self.problem, self.cache("taut"), rows_filter, self.budget)
@@ -1001,7 +1010,7 @@ class _Planner:
         ):
             return taut, "full", _SEPARATED
         if taut.status == "exhausted" and self.cache("full").radius is not None:
-            reason = self._goal_pocket(rows, self.cache("taut"))
+            reason = self._pocket(rows, GOAL, self.cache("taut"))
             if reason is not None:
                 return taut, "full", reason
         if taut.status != "cap":
@@ -1013,7 +1022,15 @@ class _Planner:
                 full.lower_bound = _length(full.path) if full.certified else self.lower_bound
                 return full, "full", None
             taut = full
-        return taut, "full", self._why(taut, rows_filter, "full")
+        if self.cache("full").radius is not None and taut.status != "cap":
+            # the radius-limited graphs ran dry, which proves nothing: A in a pocket?
+            reason = self._pocket(rows, START)
+            if reason is not None:
+                return taut, "full", reason
+        reason = self._why(taut, rows_filter, "full")
+        if self.cache("full").radius is not None and not self.budget.spent:
+            reason += f" {_RADIUS_LIMITED}"
+        return taut, "full", reason
 
     def _ellipse_search(self, rows: _RowFilter) -> tuple[_LevelResult, str] | None:
         """On a map too large for complete candidate sets: the taut graph with every pair
@@ -1029,7 +1046,7 @@ class _Planner:
         have (a Vienna street: no taut walk at all, 47 s spent growing the ellipse and
         exhausting the taut graph before the full graph's 0.6 s search found the path).
         `_certify` then proves the path found, or finds a shorter one, as for a taut path.
-        After the first L searched in vain, B may be proven walled in (`_goal_pocket`): the
+        After the first L searched in vain, B may be proven walled in (`_pocket`): the
         result then has no path, and its reason."""
         length = self.straight * ELLIPSE_START
         while not self.budget.spent:
@@ -1051,52 +1068,61 @@ class _Planner:
                 if full.status in ("cap", "exhausted"):
                     return None  # no walk at all in the full graph: growing L cannot help it
             if length == self.straight * ELLIPSE_START:
-                reason = self._goal_pocket(rows.rows, cache)
+                reason = self._pocket(rows.rows, GOAL, cache)
                 if reason is not None:
                     return _LevelResult(None, 1, 0, "exhausted", reason=reason), "full"
             length *= ELLIPSE_GROWTH
         return None
 
-    def _goal_pocket(self, rows: ParkingRows, gate: EdgeCache) -> str | None:
-        """Where B lies in a pocket that no walk meeting conditions (1)-(4) leaves (a dead end
-        whose way out needs a sharp bend, say), a large map's ellipses grow in vain and the
-        radius-limited graphs searched next prove nothing when they run dry, after minutes
-        (a Vienna street: stopped at 60 s). This proves in seconds that no valid path
-        exists: the walk search from B back to A (each edge standing for the path's segment
-        the other way round; the rules are symmetric) over complete candidate sets runs out
-        of edges within its budget (`_end_budget`). (A pocket round A ends the forward
-        searches as soon.) Returns the reason, naming the rule that closes the pocket: the
-        breadth-first search from B, bends ignored, finds every node it can reach unless
-        that rule is relaxed too. None when there is no such proof.
+    def _pocket(self, rows: ParkingRows, end: int, gate: EdgeCache | None = None) -> str | None:
+        """Where B (`end` GOAL) or A lies in a pocket that no walk meeting conditions (1)-(4)
+        leaves (a dead end whose way out needs a sharp bend, say), a large map's ellipses
+        grow in vain and the radius-limited graphs searched next prove nothing when they run
+        dry, after minutes (a Vienna street: stopped at 60 s). This proves in seconds that no
+        valid path exists: the walk search from that end (from B back to A, each edge
+        standing for the path's segment the other way round; the rules are symmetric) over
+        complete candidate sets runs out of edges within its budget (`_end_budget`).
+        Returns the reason, naming the rule that closes the pocket: the breadth-first search
+        from that end, bends ignored, finds every node it can reach unless that rule is
+        relaxed too. None when there is no such proof.
 
-        It runs after the first ellipse searched in vain, and when the taut graph has no
-        walk at all but the full graph would be radius-limited. The graph just searched
-        (`gate`), whose edges round B are mostly computed already, is tried first: where the
-        walks from B get away there, B is taken to be in no pocket."""
-        filters = _RowFilter(self.problem, rows, self.nodes, backward=True)
-        for cache in (gate, self.cache("to-start")):
-            budget = self._end_budget(cache)
+        B's pocket is looked for after the first ellipse searched in vain, and when the taut
+        graph has no walk at all but the full graph would be radius-limited; A's when the
+        radius-limited graphs ran dry. The graph just searched (`gate`), whose edges round
+        the end are mostly computed already, is tried first: where the walks get away there,
+        the end is taken to be in no pocket."""
+        backward = end == GOAL
+        filters = _RowFilter(self.problem, rows, self.nodes, backward=backward)
+        cache = self.cache("to-start")
+        for graph in (gate, cache) if gate is not None else (cache,):
+            budget = self._end_budget(graph)
             _, status = _walk_search(
-                cache, filters, budget, short_limit=_apart(self.problem), backward=True
+                graph,
+                filters,
+                budget,
+                short_limit=_apart(self.problem),
+                backward=backward,
+                straight_line=True,
             )
             self.budget.used += budget.used
             if status not in ("exhausted", "exhausted-short"):
                 return None
+        angle = "arrival" if backward else "departure"
         tests = (
             ("bends", {}),
-            ("arrival", {"arrival": False}),
-            ("rows", {"arrival": False, "row_tests": False}),
+            (angle, {angle: False}),
+            ("rows", {angle: False, "row_tests": False}),
         )
         for culprit, relax in tests:
             budget = self._end_budget(cache)
-            walled_in = _walled_in(cache, filters, budget, GOAL, **relax)
+            walled_in = _walled_in(cache, filters, budget, end, **relax)
             self.budget.used += budget.used
             if not walled_in:
                 return _explain(self.problem, culprit)
         return _explain(self.problem, "unreachable")
 
     def _end_budget(self, cache: EdgeCache) -> _Budget:
-        """A budget for a search from B (`_goal_pocket`), spent once `cache` has
+        """A budget for a search from an end (`_pocket`), spent once `cache` has
         computed the out-edges of `END_NODES` more nodes, after `END_EXPANSIONS`
         expansions, or with the plan's: it passes the stop request on (the caller adds its
         expansions to the plan's)."""

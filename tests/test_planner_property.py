@@ -210,7 +210,7 @@ def test_every_returned_path_is_valid_on_random_maps(pb):
 def test_the_walk_search_from_b_back_to_a_mirrors_the_one_from_a():
     """The rules a walk meets (bends, the short-edge rule, the rows, the parking angles) are
     symmetric: the search from B back to A, which proves B walled in on a city map
-    (`_Planner._goal_pocket`), finds a walk exactly when the search from A does, as long."""
+    (`_Planner._pocket`), finds a walk exactly when the search from A does, as long."""
     outcomes = Counter()
     for seed in range(60):
         pb = turn_round_map(seed)

@@ -343,11 +343,34 @@ def test_b_in_a_box_is_proven_walled_in_when_the_full_graph_is_radius_limited():
     assert plan.expansions < 10_000
 
 
+def _a_in_a_box() -> PathProblem:
+    """The box round B of `walled_in`, with A and B swapped: A in a box open towards its
+    row's direction, so every way out turns more than 90 degrees somewhere."""
+    box = walled_in(random_buildings(200), 40.0, gap=25.0)
+    return scenario_problem(box, start=box.goal, goal=box.start)
+
+
+def test_a_in_a_box_is_proven_walled_in_when_the_radius_limited_graphs_run_dry():
+    """The forward searches run dry on radius-limited graphs, which proves nothing; the walk
+    search from A over complete candidate sets then runs dry too, which does."""
+    plan = plan_path(_a_in_a_box())
+    assert not plan.valid
+    assert plan.reason == search._explain(_a_in_a_box(), "bends")
+
+
+def test_a_dry_radius_limited_search_says_it_proves_nothing(monkeypatch):
+    monkeypatch.setattr(search._Planner, "_pocket", lambda *args, **kwargs: None)
+    plan = plan_path(_a_in_a_box())
+    assert not plan.valid
+    assert plan.reason.endswith(search._RADIUS_LIMITED)
+    assert plan.reason.startswith("every route from A to B needs a bend sharper than 90")
+
+
 def test_b_in_the_open_is_no_pocket(dense):
     planner = search._Planner(dense)
     straight = float(np.hypot(*(dense.goal - dense.start)))
     ellipse = planner.certify_cache(search.ELLIPSE_START * straight, taut=True)
-    assert planner._goal_pocket(dense.rows(3), ellipse) is None
+    assert planner._pocket(dense.rows(3), GOAL, ellipse) is None
     assert planner.budget.used <= 2 * search.END_EXPANSIONS
 
 

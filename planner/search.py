@@ -939,14 +939,12 @@ class _Planner:
     ) -> None:
         self.problem = problem
         self.straight = float(np.hypot(*(problem.goal - problem.start)))
-        #: Proven lower bound on every valid path (m): the straight line.
-        self.lower_bound = self.straight
         poll = None
         if progress is not None:
 
             def poll(used: int) -> bool:
                 best = self.budget.best
-                bound = self.lower_bound
+                bound = self.straight
                 if self.budget.proving:
                     bound = max(bound, self.budget.floor)
                 bound = min(bound, best)
@@ -1009,7 +1007,8 @@ class _Planner:
             problem.start, problem.goal, problem.safety_margin - DISTANCE_TOLERANCE
         ):
             return taut, "full", _SEPARATED
-        if taut.status == "exhausted" and self.cache("full").radius is not None:
+        radius_limited = self.cache("full").radius is not None
+        if taut.status == "exhausted" and radius_limited:
             reason = self._pocket(rows, GOAL, self.cache("taut"))
             if reason is not None:
                 return taut, "full", reason
@@ -1018,17 +1017,17 @@ class _Planner:
                 self.problem, self.cache("full"), rows_filter, self.budget, explain=True
             )
             if full.path is not None:
-                full.certified = full.status == "found" and self.cache("full").radius is None
-                full.lower_bound = _length(full.path) if full.certified else self.lower_bound
+                full.certified = full.status == "found" and not radius_limited
+                full.lower_bound = _length(full.path) if full.certified else self.straight
                 return full, "full", None
             taut = full
-        if self.cache("full").radius is not None and taut.status != "cap":
+        if radius_limited and taut.status != "cap":
             # the radius-limited graphs ran dry, which proves nothing: A in a pocket?
             reason = self._pocket(rows, START)
             if reason is not None:
                 return taut, "full", reason
         reason = self._why(taut, rows_filter, "full")
-        if self.cache("full").radius is not None and not self.budget.spent:
+        if radius_limited and not self.budget.spent:
             reason += f" {_RADIUS_LIMITED}"
         return taut, "full", reason
 
@@ -1165,7 +1164,8 @@ class _Planner:
         self, taut: _LevelResult, rows: _RowFilter, level: str
     ) -> tuple[_LevelResult, str, None]:
         """Prove the path found shortest, or find a shorter one (`level`: the graph it came
-        from, taut or, when the taut graph had none, full; "the taut path" below). The full graph of definition 5 inside the ellipse of the
+        from, taut or, when the taut graph had none, full; "the taut path" below). As short
+        as the straight line, it is. The full graph of definition 5 inside the ellipse of the
         taut length L (`certify_cache`, complete candidate sets) holds every path shorter than
         L. A valid path as short as the unconstrained shortest path there (the heuristic's
         value at A, rows, angles and bends ignored) is the shortest: no valid path can beat
@@ -1180,9 +1180,9 @@ class _Planner:
         so it is never used to certify."""
         length = _length(taut.path)
         self.budget.best = min(self.budget.best, length)
-        taut.lower_bound = self.lower_bound
+        taut.lower_bound = self.straight
         gap = self.problem.gap_tolerance
-        if length <= _at_most(self.lower_bound):  # as short as the straight line
+        if length <= _at_most(self.straight):
             taut.certified = True
             return taut, level, None
         if self.budget.spent or within_gap(length, taut.lower_bound, gap):
@@ -1191,7 +1191,7 @@ class _Planner:
         if full_cache is None:
             return taut, level, None
         free = self._unconstrained(full_cache)
-        taut.lower_bound = max(self.lower_bound, min(free, length))
+        taut.lower_bound = max(self.straight, min(free, length))
         if length <= _at_most(free):
             taut.certified = True
             taut.lower_bound = length

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from planner.obstacles import Obstacles
+from planner.scenarios import rectangle_rings
 from planner.types import PathProblem
 
 #: The safety margin rho_c (m) of the hand-made maps.
@@ -45,9 +46,11 @@ def terraced_rows(
     side walls), in `rows` x `columns`, `street` apart, the first block's south-west corner at
     (0, 0)."""
     pitch = houses * width + street
-    return [
-        np.array([[x, y], [x + width, y], [x + width, y + depth], [x, y + depth]], float)
+    corners = [
+        (x, y)
         for y in np.arange(rows) * (depth + street)
         for x0 in np.arange(columns) * pitch
         for x in x0 + np.arange(houses) * width
     ]
+    rect = [(x + width / 2.0, y + depth / 2.0, width, depth, 0.0) for x, y in corners]
+    return list(rectangle_rings(np.array(rect)))

@@ -81,7 +81,6 @@ class Nodes:
 
     points: np.ndarray  # (n, 2)
     kind: np.ndarray  # (n,) KIND_*
-    clearance: np.ndarray  # (n,) distance to the nearest obstacle
     anchor: np.ndarray  # (n, 2), nan when none
     cone: np.ndarray  # (n, 2, 2)
     prunable: np.ndarray  # (n,) bool
@@ -171,13 +170,13 @@ def graph_nodes(problem: PathProblem) -> Nodes:
     flat_any = np.zeros(len(all_pts), bool)
     np.logical_or.at(flat_any, label, flat)
 
-    clearance = obstacles.distance_to_points(all_pts)
-    keep = rep & ((kind <= KIND_GOAL) | (clearance >= rho - DISTANCE_TOLERANCE))
+    # Obstacle nodes within the margin are gone already; row nodes are tested here.
+    keep = rep.copy()
+    keep[2:base] &= obstacles.distance_to_points(base_pts[2:]) >= rho - DISTANCE_TOLERANCE
     idx = np.flatnonzero(keep)
     return Nodes(
         points=all_pts[idx],
         kind=kind[idx],
-        clearance=clearance[idx],
         anchor=anchor[idx],
         cone=cone[idx],
         prunable=prunable[idx] & (kind[idx] == KIND_OBSTACLE),
@@ -763,6 +762,13 @@ class EdgeCache:
             self.occlusion.record(keys[~known], ~blocked)
             idx = np.sort(np.concatenate([idx[known & clear], fresh[~blocked]]))
         else:
+            if self.radius is not None and len(idx):
+                # Pairs much longer than the radius (A's and B's complete sets, wedges
+                # across open ground) mostly cross an obstacle: the core grid culls them.
+                far = idx[length[idx] > 2.0 * self.radius]
+                if len(far):
+                    blocked = self._core_grid().blocks(pts[src[far]], pts[dst[far]])
+                    idx = np.setdiff1d(idx, far[blocked], assume_unique=True)
             segs = np.stack([pts[src[idx]], pts[dst[idx]]], axis=1)
             idx = idx[~self.problem.obstacles.segments_within(segs, rho - DISTANCE_TOLERANCE)]
         src, dst, d, length = src[idx], dst[idx], d[idx], length[idx]

@@ -263,9 +263,7 @@ class CoreGrid:
         box = shapely.box(x0 - distance, y0 - distance, x1 + distance, y1 + distance)
         near = obstacles.tree.query(box)
         if len(near) and inner > 0:
-            grown = shapely.union_all(
-                shapely.buffer(obstacles.geometries[near], inner, quad_segs=4)
-            )
+            grown = shapely.buffer(obstacles.geometries[near], inner, quad_segs=4)
             core = _cell_centres_inside(grown, origin, cell, shape)
         return cls(origin, cell, core)
 
@@ -312,32 +310,36 @@ class CoreGrid:
 
 
 def _cell_centres_inside(
-    area: shapely.Geometry, origin: np.ndarray, cell: float, shape
+    area: shapely.Geometry | np.ndarray, origin: np.ndarray, cell: float, shape
 ) -> np.ndarray:
-    """(nx, ny) bool: which cell centres lie inside `area` (polygons with holes), by a
-    scanline fill: each row of centres crosses the rings' edges (half-open in y), and the
-    even-odd rule between the sorted crossings fills the row."""
-    coords, ring = shapely.get_coordinates(
-        shapely.get_rings(shapely.get_parts(area)), return_index=True
-    )
+    """(nx, ny) bool: which cell centres lie inside `area`, polygons with holes that may
+    overlap (an array of them, or one geometry), by a scanline fill: each row of centres
+    crosses each ring's edges (half-open in y); the crossings of one ring in one row pair
+    up, [x_1, x_2), [x_3, x_4), ..., and count +1 over an outer ring's spans, -1 over a
+    hole's. A centre is inside where the count is positive, so no union is needed."""
+    parts = shapely.get_parts(area)
+    rings, polygon = shapely.get_rings(parts, return_index=True)
+    hole = np.ones(len(rings), bool)
+    hole[np.searchsorted(polygon, np.arange(len(parts)))] = False  # each polygon's first
+    coords, ring = shapely.get_coordinates(rings, return_index=True)
     same = ring[:-1] == ring[1:]
-    a, b = coords[:-1][same], coords[1:][same]
+    a, b, ring = coords[:-1][same], coords[1:][same], ring[:-1][same]
     ys = origin[1] + cell * (np.arange(shape[1]) + 0.5)
     low, high = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
     first = np.searchsorted(ys, low, side="left")  # rows with low <= y < high
     last = np.searchsorted(ys, high, side="left")
-    count = last - first
-    edge, step = ragged(count)
+    edge, step = ragged(last - first)
     row = first[edge] + step
-    a, b, y = a[edge], b[edge], ys[row]
+    a, b, y, ring = a[edge], b[edge], ys[row], ring[edge]
     x = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
-    order = np.lexsort((x, row))
-    row, x = row[order], x[order]
-    # crossings pair up within a row: [x_1, x_2), [x_3, x_4), ...
+    order = np.lexsort((x, row, ring))
+    row, x, ring = row[order], x[order], ring[order]
     column = np.ceil((x - origin[0]) / cell - 0.5).astype(np.int64).clip(0, shape[0])
-    rank = np.arange(len(row)) - np.searchsorted(row, row, side="left")
+    group = ring.astype(np.int64) * shape[1] + row
+    opens = (np.arange(len(row)) - np.searchsorted(group, group, side="left")) % 2 == 0
+    sign = np.where(hole[ring], -1, 1)
     change = np.zeros((shape[1], shape[0] + 1), np.int32)
-    np.add.at(change, (row, column), np.where(rank % 2 == 0, 1, -1))
+    np.add.at(change, (row, column), np.where(opens, sign, -sign))
     return (np.cumsum(change, axis=1, dtype=np.int32)[:, : shape[0]] > 0).T
 
 

@@ -442,19 +442,27 @@ def _donut_and_blocks() -> tuple[Obstacles, shapely.Polygon]:
 
 
 def test_a_scanline_fill_finds_the_cell_centres_inside_polygons_with_holes():
+    """One geometry or many that overlap (the buffered footprints, not merged first: a
+    union of a city costs seconds), holes and a polygon in another's hole included."""
     obstacles, court = _donut_and_blocks()
-    area = shapely.union_all([court, *shapely.buffer(obstacles.geometries, 3.0, quad_segs=4)])
+    parts = [court, *shapely.buffer(obstacles.geometries, 3.0, quad_segs=4)]
+    parts += [shapely.box(100.0, 50.0, 160.0, 70.0), shapely.box(40.0, 40.0, 50.0, 50.0)]
+    parts += [shapely.box(205.0, 25.0, 240.0, 60.0)]  # across the first block
+    area = shapely.union_all(parts)
     origin, cell, shape = np.array([-80.0, -40.0]), 1.7, (300, 220)
     xs = origin[0] + cell * (np.arange(shape[0]) + 0.5)
     ys = origin[1] + cell * (np.arange(shape[1]) + 0.5)
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
     expected = shapely.contains_xy(area, gx.ravel(), gy.ravel()).reshape(shape)
-    found = _cell_centres_inside(area, origin, cell, shape)
     assert (
         expected.sum() > 1000
-        and not expected[(xs > 35) & (xs < 85)][:, (ys > 35) & (ys < 85)].any()
+        and not expected[(xs > 55) & (xs < 85)][:, (ys > 55) & (ys < 85)].any()
+        and expected[(xs > 41) & (xs < 49)][:, (ys > 41) & (ys < 49)].all()
     )
-    assert np.array_equal(found, expected)
+    overlap = shapely.area(shapely.intersection(np.array(parts)[:, None], parts))
+    assert np.count_nonzero(np.triu(overlap, 1) > 1.0) >= 2  # the polygons do overlap
+    assert np.array_equal(_cell_centres_inside(area, origin, cell, shape), expected)
+    assert np.array_equal(_cell_centres_inside(np.array(parts), origin, cell, shape), expected)
 
 
 def test_the_core_grid_blocks_only_segments_that_come_too_close_and_most_that_cross():

@@ -47,7 +47,7 @@ def test_nodes_of_a_square_corners_merged_and_side_nodes_flat():
     pts = nodes.points[obstacle]
     outer = {(-1.0, -1.0), (11.0, -1.0), (11.0, 11.0), (-1.0, 11.0)}
     assert outer <= {tuple(np.round(p, 9)) for p in pts}
-    corner_dist = nodes.clearance[obstacle]
+    corner_dist = pb.obstacles.distance_to_points(nodes.points[obstacle])
     assert np.sum(np.isclose(corner_dist, SQRT2)) == 4  # outer corners: rho sqrt 2
     assert np.sum(np.isclose(corner_dist, 1.0)) == 8  # side nodes hug a side at rho
     assert np.array_equal(nodes.flat[obstacle], np.isclose(corner_dist, 1.0))
@@ -67,7 +67,7 @@ def test_nodes_inside_a_margin_are_dropped_and_row_nodes_sit_beside_a_and_b():
     overlapping = Obstacles(polygons=(square(0, 0, 20), square(10, 10, 20)))
     pb = problem((-50.0, 0.0), (80.0, 0.0), overlapping, theta_a=30.0)
     nodes = graph_nodes(pb)
-    assert np.all(nodes.clearance[2:] >= RHO - 1e-6)
+    assert np.all(pb.obstacles.distance_to_points(nodes.points[2:]) >= RHO - 1e-6)
     assert len(nodes) < 2 + 4 + 2 * 16  # the reflex corner's nodes are gone
     rows = nodes.points[nodes.kind == KIND_ROW]
     np.testing.assert_allclose(np.hypot(*(rows[:2] - pb.start).T), RHO * SQRT2)

@@ -28,7 +28,6 @@ is the same line, with valid edges whenever v->w is valid (the returned path is 
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -361,7 +360,7 @@ class Occlusion:
         if len(obstacles) > _OCCLUDERS:
             obstacles = obstacles.merged(min(_TOUCHING, safety_margin))
         self.occluders = obstacles
-        self._verdicts: dict[int, int] = {}  # pair key -> 1 clear, 0 blocked (`verdicts`)
+        self._verdicts = _KeyTable()  # pair key -> 1 clear, 0 blocked (`verdicts`)
         self.shadow = np.empty((len(nodes), _OCCLUDERS, 4))
         self.shadow[...] = [0.0, np.inf, -np.inf, np.inf]
         self.done = np.zeros(len(nodes), bool)
@@ -389,14 +388,11 @@ class Occlusion:
     def verdicts(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(known, clear) per pair key: whether an ellipse cache has tested the pair's
         clearance already, and its answer."""
-        if not self._verdicts:
-            return np.zeros(len(keys), bool), np.zeros(len(keys), bool)
-        found = map(self._verdicts.get, keys.tolist(), itertools.repeat(2, len(keys)))
-        found = np.fromiter(found, np.int8, len(keys))
-        return found != 2, found == 1
+        found = self._verdicts.get(keys)
+        return found >= 0, found == 1
 
     def record(self, keys: np.ndarray, clear: np.ndarray) -> None:
-        self._verdicts.update(zip(keys.tolist(), clear.astype(np.int8).tolist(), strict=True))
+        self._verdicts.put(keys, clear.astype(np.int8))
 
     def grid(self, bounds: tuple[float, float, float, float]) -> CoreGrid:
         """A core grid covering `bounds` (the last one built when it does)."""
@@ -842,6 +838,73 @@ class EdgeCache:
         self.first[sources] = self.size + np.concatenate([[0], np.cumsum(counts)[:-1]])
         self.count[sources] = counts
         self.size = need
+
+
+class _KeyTable:
+    """Non-negative int64 keys -> int8 values, looked up and stored a whole array at a time
+    (open addressing, linear probing, at most half full): the clearance verdicts of
+    millions of node pairs, where a dict costs a Python call per key."""
+
+    _EMPTY = -1
+
+    def __init__(self) -> None:
+        self._keys = np.full(1 << 10, self._EMPTY, np.int64)
+        self._values = np.zeros(1 << 10, np.int8)
+        self._count = 0
+
+    def get(self, keys: np.ndarray) -> np.ndarray:
+        """The value of each key, -1 where it has none."""
+        out = np.full(len(keys), -1, np.int8)
+        if self._count == 0 or len(keys) == 0:
+            return out
+        mask = len(self._keys) - 1
+        rows, at = np.arange(len(keys)), self._hash(keys) & mask
+        while len(rows):
+            held = self._keys[at]
+            hit = held == keys[rows]
+            out[rows[hit]] = self._values[at[hit]]
+            going = ~hit & (held != self._EMPTY)
+            rows, at = rows[going], (at[going] + 1) & mask
+        return out
+
+    def put(self, keys: np.ndarray, values: np.ndarray) -> None:
+        """Store values; a key stored before keeps its value (a pair's verdict never
+        changes), a key given twice keeps one of them."""
+        if 2 * (self._count + len(keys)) > len(self._keys):
+            self._grow(self._count + len(keys))
+        mask = len(self._keys) - 1
+        rows, at = np.arange(len(keys)), self._hash(keys) & mask
+        while len(rows):
+            held = self._keys[at]
+            done = held == keys[rows]
+            empty = held == self._EMPTY
+            # each key claims the empty slot it reached; where several did, the last
+            # write holds it (a key given twice: both hold it) and the others probe on
+            slots, claim = at[empty], rows[empty]
+            self._keys[slots] = keys[claim]
+            won = self._keys[slots] == keys[claim]
+            self._values[slots[won]] = values[claim[won]]
+            self._count += int(np.count_nonzero(won))
+            done[empty] = won
+            rows, at = rows[~done], (at[~done] + 1) & mask
+
+    def _grow(self, count: int) -> None:
+        keys = self._keys[self._keys != self._EMPTY]
+        values = self._values[self._keys != self._EMPTY]
+        size = len(self._keys)
+        while 2 * count > size:
+            size *= 2
+        self._keys = np.full(size, self._EMPTY, np.int64)
+        self._values = np.zeros(size, np.int8)
+        self._count = 0
+        if len(keys):
+            self.put(keys, values)
+
+    @staticmethod
+    def _hash(keys: np.ndarray) -> np.ndarray:
+        """Well spread bits (a multiplicative hash, the high bits brought down)."""
+        mixed = keys.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+        return (mixed ^ (mixed >> np.uint64(29))).astype(np.int64) & np.int64(0x7FFFFFFFFFFFFFFF)
 
 
 def _rank_in_group(group: np.ndarray) -> np.ndarray:

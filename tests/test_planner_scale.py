@@ -538,3 +538,28 @@ def test_segments_are_tested_alike_before_and_after_the_prepared_union(monkeypat
     assert "_prepared_union" in obstacles.__dict__
     assert tree[:50].all() and 0.05 < tree.mean() < 0.9
     assert np.array_equal(tree, union)
+
+
+def test_the_verdict_table_answers_as_a_dict_would():
+    """Pair verdicts are stored a whole array at a time (`graph._KeyTable`): through growth,
+    keys given twice in one call and keys stored before (which keep their first value), it
+    answers every look-up as a dict filled the same way would."""
+    rng = np.random.default_rng(8)
+    table, truth = graph._KeyTable(), {}
+    for batch in range(120):
+        keys = rng.integers(0, 50_000 if batch % 2 else 2**40, int(rng.integers(0, 4000)))
+        values = rng.integers(0, 2, len(keys)).astype(np.int8)
+        asked = np.concatenate([rng.integers(0, 50_000, 2000), keys[:50]])
+        expected = np.array([truth.get(int(k), -1) for k in asked], np.int8)
+        assert np.array_equal(table.get(asked), expected)
+        table.put(keys, values)
+        given: dict[int, set[int]] = {}
+        for k, v in zip(keys.tolist(), values.tolist(), strict=True):
+            if k not in truth:
+                given.setdefault(k, set()).add(v)
+        stored = table.get(np.array(list(given), np.int64))
+        assert all(int(s) in given[k] for k, s in zip(given, stored, strict=True))
+        truth.update(zip(given, stored.tolist(), strict=True))
+    assert len(truth) > 100_000 and table._count >= len(truth)
+    everything = np.array(list(truth), np.int64)
+    assert np.array_equal(table.get(everything), np.array(list(truth.values()), np.int8))

@@ -335,6 +335,43 @@ def test_a_certified_path_is_the_shortest_of_the_full_graph(seed):
     assert plan.length_m == pytest.approx(search._length(shortest.path), abs=1e-6)
 
 
+def test_a_grown_ellipse_is_searched_in_the_full_graph_and_its_path_comes_back_proven(
+    monkeypatch,
+):
+    """A wall across the middle makes every route 30 % longer than the straight line, so the
+    first ellipse (1.15 |AB|, taut graph) holds none. The grown one is searched in the full
+    graph of definition 5 at once, and its path is the full graph's shortest (the exhaustive
+    search over every pair agrees): no taut search of the grown ellipse, no third ellipse
+    to certify it."""
+    monkeypatch.setattr(search, "LOCAL_CANDIDATES", 40)  # radius-limited: ellipses first
+    monkeypatch.setattr(search, "LOCAL_CANDIDATES_FULL", 40)
+    base = random_buildings(80, seed=3, size=900.0)
+    middle = (base.start + base.goal) / 2.0
+    along = (base.goal - base.start) / np.hypot(*(base.goal - base.start))
+    across = np.array([-along[1], along[0]])
+    wall = np.array([[middle - 420.0 * across, middle + 420.0 * across]])
+    prob = problem(base.start, base.goal, Obstacles(polygons=base.obstacles.polygons, walls=wall))
+    searched: list[bool] = []
+    original = search._Planner.certify_cache
+
+    def certify_cache(self, length, taut=False):
+        searched.append(taut)
+        return original(self, length, taut)
+
+    monkeypatch.setattr(search._Planner, "certify_cache", certify_cache)
+    plan = plan_path(prob)
+    straight = float(np.hypot(*(prob.goal - prob.start)))
+    assert plan.valid and plan.certified and plan.level == "full"
+    assert plan.length_m > search.ELLIPSE_START * straight
+    assert searched == [True, False]
+    nodes = graph_nodes(prob)
+    every_pair = EdgeCache(prob, nodes, taut=False, prune_collinear=True)
+    rows = search._RowFilter(prob, plan.rows, nodes)
+    shortest = search._exact_level(prob, every_pair, rows, search._Budget(10**8))
+    assert every_pair.radius is None and shortest.status == "found"
+    assert plan.length_m == pytest.approx(search._length(shortest.path), abs=1e-6)
+
+
 def _dead_end_bay() -> PathProblem:
     """400 random buildings over 1.5 km (radius-limited graphs), and B in a bay 38 m wide
     and 54 m deep, open to the east, with its row leaving east: every route enters heading

@@ -287,6 +287,19 @@ def test_without_room_to_certify_the_bound_is_the_straight_line(dense):
     assert plan.lower_bound_m < plan.length_m
 
 
+def _record_ellipses(monkeypatch) -> list[tuple[float, bool]]:
+    """Every ellipse cache the planner builds from now on, as (L, taut), in order."""
+    made: list[tuple[float, bool]] = []
+    original = search._Planner.certify_cache
+
+    def certify_cache(self, length, taut=False):
+        made.append((length, taut))
+        return original(self, length, taut)
+
+    monkeypatch.setattr(search._Planner, "certify_cache", certify_cache)
+    return made
+
+
 def test_where_the_taut_graph_lacks_a_bend_the_full_graph_is_searched_at_the_same_bound(
     dense, monkeypatch
 ):
@@ -297,21 +310,14 @@ def test_where_the_taut_graph_lacks_a_bend_the_full_graph_is_searched_at_the_sam
     graphs (a Vienna street: 47 s instead of 4 s)."""
     expected = plan_path(dense)
     monkeypatch.setattr(search, "wraps_corner", lambda d_in, dirs, *_: np.zeros(len(dirs), bool))
-    grown: list[float] = []
-    original = search._Planner.certify_cache
-
-    def certify_cache(self, length, taut=False):
-        grown.append(length)
-        return original(self, length, taut)
-
-    monkeypatch.setattr(search._Planner, "certify_cache", certify_cache)
+    ellipses = _record_ellipses(monkeypatch)
     monkeypatch.setattr(search, "_POLL_EVERY", 1)
     bounds: list[float] = []
     plan = plan_path(dense, lambda state: bounds.append(state.lower_bound_m) or False)
     assert plan.valid and plan.level == "full" and plan.certified
     assert plan.length_m == pytest.approx(expected.length_m, abs=1e-6)
     straight = float(np.hypot(*(dense.goal - dense.start)))
-    assert max(grown) < 1.5 * straight  # the ellipse did not grow far
+    assert max(length for length, _ in ellipses) < 1.5 * straight  # it did not grow far
     # the taut walks searched in vain went past 1.15 |AB|, the answer is shorter: the
     # progress reports only bounds proven for every valid path
     assert bounds and max(bounds) <= plan.length_m + 1e-6
@@ -351,19 +357,12 @@ def test_a_grown_ellipse_is_searched_in_the_full_graph_and_its_path_comes_back_p
     across = np.array([-along[1], along[0]])
     wall = np.array([[middle - 420.0 * across, middle + 420.0 * across]])
     prob = problem(base.start, base.goal, Obstacles(polygons=base.obstacles.polygons, walls=wall))
-    searched: list[bool] = []
-    original = search._Planner.certify_cache
-
-    def certify_cache(self, length, taut=False):
-        searched.append(taut)
-        return original(self, length, taut)
-
-    monkeypatch.setattr(search._Planner, "certify_cache", certify_cache)
+    ellipses = _record_ellipses(monkeypatch)
     plan = plan_path(prob)
     straight = float(np.hypot(*(prob.goal - prob.start)))
     assert plan.valid and plan.certified and plan.level == "full"
     assert plan.length_m > search.ELLIPSE_START * straight
-    assert searched == [True, False]
+    assert [taut for _, taut in ellipses] == [True, False]
     nodes = graph_nodes(prob)
     every_pair = EdgeCache(prob, nodes, taut=False, prune_collinear=True)
     rows = search._RowFilter(prob, plan.rows, nodes)

@@ -242,7 +242,10 @@ class GoalDistance:
     every node near the line from A looks as good as the best route). Edges are symmetric
     (clearance and tangency are tested at both ends), so a node's out-edges are its
     in-edges; A is no target and no way through (a valid walk never comes back to it), so
-    its own out-edges are read once. Settled nodes count against `max_expansions`."""
+    its own out-edges are read once. With complete candidate sets, once nothing is left to
+    settle, every node not settled is out of B's reach: its value is infinite (A's too, in
+    an ellipse round a dead end), and the searches drop it. Settled nodes count against
+    `max_expansions`."""
 
     def __init__(self, cache: EdgeCache, budget: _Budget) -> None:
         self.cache = cache
@@ -306,6 +309,11 @@ class GoalDistance:
                 heapq.heappush(heap, (item, node))
         if heap:  # no node left has a key below the queue's least
             self.reach = max(self.reach, heap[0][0])
+        elif cache.radius is None:
+            # Every node that reaches B is settled: the others reach it in no way (with
+            # complete candidate sets the edges are symmetric, so the search from B saw them
+            # all). A dead end in an ellipse: A then says so, instead of its last key.
+            self.reach = math.inf
         self.values = np.where(settled, dist, np.maximum(self._to_goal, self.reach - to_start))
 
 
@@ -422,8 +430,8 @@ def _walk_search(
         for s_out, w, c, f in zip(
             state.tolist(), target.tolist(), cost.tolist(), score.tolist(), strict=True
         ):
-            if left.get(w, 1) == 0:
-                continue  # every out-edge of w is already relaxed from a cheaper state
+            if left.get(w, 1) == 0 or f == math.inf:
+                continue  # every out-edge of w is relaxed from a cheaper state, or B is out of reach
             if s_out & 1:
                 if s_out in bent_pushed:
                     continue
@@ -497,7 +505,8 @@ def _label_search(
         lab_closed.extend([closed] * len(edge))
         f = g + weight * heuristic[cache.dst[edge]]
         for k, (fk, gk) in enumerate(zip(f.tolist(), g.tolist(), strict=True)):
-            heapq.heappush(heap, (fk, -gk, first + k))
+            if fk < math.inf:  # (B out of reach from there)
+                heapq.heappush(heap, (fk, -gk, first + k))
 
     def segments_of(closed) -> tuple[np.ndarray, ...]:
         key = id(closed)

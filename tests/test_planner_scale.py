@@ -15,7 +15,13 @@ import planner.graph as graph
 import planner.search as search
 from planner.graph import GOAL, START, EdgeCache, graph_nodes
 from planner.obstacles import Obstacles, _cell_centres_inside
-from planner.scenarios import city_grid, random_buildings, scenario_problem, walled_in
+from planner.scenarios import (
+    city_grid,
+    paper_scenario,
+    random_buildings,
+    scenario_problem,
+    walled_in,
+)
 from planner.search import SearchProgress, goal_distance, plan_path
 from planner.types import PathProblem
 from planner.validity import check_path
@@ -70,6 +76,25 @@ def test_goal_distance_run_on_settles_every_node_below_the_key_and_stays_a_lower
     assert np.allclose(h[reached[below]], truth[below])  # exact where the key is below
     size = cache.size
     assert np.all(h[cache.src[:size]] <= cache.length[:size] + h[cache.dst[:size]] + 1e-6)
+
+
+def test_nodes_out_of_b_s_reach_get_an_infinite_distance():
+    """B walled in: once the reverse search has settled every node that reaches B, the
+    others (A among them) reach it in no way, and say so (infinite, not the last key); the
+    walk search then finds no walk at once instead of taking them for near ones."""
+    prob = scenario_problem(walled_in(paper_scenario(), 80.0))
+    cache = EdgeCache(prob, graph_nodes(prob), taut=True, prune_collinear=True)
+    goal = search.heuristic_of(cache, search._Budget(10**9))
+    exact = _complete_graph_distances(cache)
+    inside = np.array(sorted(exact))
+    assert not goal.open and np.isinf(goal.values[START])
+    assert np.allclose(goal.values[inside], [exact[v] for v in inside])
+    outside = np.setdiff1d(cache.members, inside)
+    assert len(outside) > 40 and np.all(np.isinf(goal.values[outside]))
+    rows = search._RowFilter(prob, prob.rows(1), cache.nodes)
+    budget = search._Budget(10**9)
+    walk, status = search._walk_search(cache, rows, budget)
+    assert walk is None and status == "exhausted" and budget.used == 1  # A's edges only
 
 
 @pytest.mark.parametrize("seed", [1, 2])

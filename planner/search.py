@@ -1061,7 +1061,7 @@ class _Planner:
 
         A grown ellipse is searched in the full graph of definition 5 at once: a path longer
         than 1.15 |AB| would need that proof anyway, and the one search costs less than the
-        taut graph's followed by the full graph's (Vienna 3.7 km route 2: 5.5 -> 4.8 s). Its
+        taut graph's followed by the full graph's (Vienna 3.7 km route 2: 5.5 -> 4.4 s). Its
         path, the shortest valid one shorter than L when the search ran to the end, comes
         back certified."""
         length = self.straight * ELLIPSE_START

@@ -889,8 +889,8 @@ class _KeyTable:
             rows, at = rows[~done], (at[~done] + 1) & mask
 
     def _grow(self, count: int) -> None:
-        keys = self._keys[self._keys != self._EMPTY]
-        values = self._values[self._keys != self._EMPTY]
+        used = self._keys != self._EMPTY
+        keys, values = self._keys[used], self._values[used]
         size = len(self._keys)
         while 2 * count > size:
             size *= 2

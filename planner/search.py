@@ -1027,9 +1027,7 @@ class _Planner:
                 self.problem, self.cache("full"), rows_filter, self.budget, explain=True
             )
             if full.path is not None:
-                full.certified = full.status == "found" and not radius_limited
-                full.lower_bound = _length(full.path) if full.certified else self.straight
-                return full, "full", None
+                return self._from_full_graph(full, complete=not radius_limited), "full", None
             taut = full
         if radius_limited and taut.status != "cap":
             # the radius-limited graphs ran dry, which proves nothing: A in a pocket?
@@ -1071,14 +1069,11 @@ class _Planner:
             if cache is None:
                 return None
             result = _exact_level(self.problem, cache, rows, self.budget, length)
-            if result.path is not None and not taut:
-                found = _length(result.path)
-                self.budget.best = min(self.budget.best, found)
-                result.certified = result.status == "found"
-                result.lower_bound = found if result.certified else self.straight
-                return result, "full"
-            if result.path is not None:
+            if result.path is not None and taut:
                 return result, "taut"
+            if result.path is not None:
+                self.budget.best = min(self.budget.best, _length(result.path))
+                return self._from_full_graph(result, complete=True), "full"
             if result.status == "cap":
                 return None
             if taut:
@@ -1097,6 +1092,14 @@ class _Planner:
             taut = False
             length *= ELLIPSE_GROWTH
         return None
+
+    def _from_full_graph(self, result: _LevelResult, complete: bool) -> _LevelResult:
+        """`result`, a path the full graph of definition 5 gave, certified when that graph
+        had complete candidate sets (every path the search bounds is in it) and the search
+        ran to the end; its lower bound otherwise the straight line."""
+        result.certified = complete and result.status == "found"
+        result.lower_bound = _length(result.path) if result.certified else self.straight
+        return result
 
     def _pocket(self, rows: ParkingRows, end: int, gate: EdgeCache | None = None) -> str | None:
         """Where B (`end` GOAL) or A lies in a pocket that no walk meeting conditions (1)-(4)

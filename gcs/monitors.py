@@ -192,7 +192,10 @@ class SafetyMonitor:
                 ("obstacle_near",),
                 obstacle < rho,
                 lambda: MonitorEvent(
-                    t, "warning", "near_obstacle", f"a UAV is {obstacle:.2f} m from an obstacle"
+                    t,
+                    "warning",
+                    "near_obstacle",
+                    f"a UAV is {obstacle:.2f} m from an obstacle (< rho_c)",
                 ),
                 cleared=obstacle > rho + NEAR_HYSTERESIS_M,
             )

@@ -89,7 +89,10 @@ def build_layout() -> fl.Layout:
         ),
     )
     distances = fl.PlotPanel(
-        title="Smallest distances now (m): UAV-UAV (>= 2 rho_c by design), UAV-obstacle (>= rho_c)",
+        title=(
+            "Smallest distances now (m), > 0 by design: UAV-UAV (targets keep 2 rho_c), "
+            "UAV-obstacle (targets keep rho_c)"
+        ),
         config=fl.PlotConfig(
             paths=[
                 fl.PlotSeries(value="/fleet.uav_uav_m", label="UAV-UAV", color="#1f77b4"),

@@ -96,7 +96,7 @@ def mission_problem(
     tolerance. For a stations mission, its first leg (A -> the first point visited, with
     Delta_A): what its row refusals are about."""
     if mission.stations:
-        return first_leg(route_problem(mission, method), mission.fleet.size or 1)
+        return first_leg(route_problem(mission, method, gap_tolerance), mission.fleet.size or 1)
     return PathProblem(
         start=mission.start.xy,
         goal=mission.goal.xy,
@@ -144,7 +144,9 @@ def plan_mission(
         return time_limit_s is not None and elapsed >= time_limit_s
 
     if mission.stations:
-        return _plan_stations(mission, cap_speed, conns, conn_key, method, progress, clock)
+        return _plan_stations(
+            mission, cap_speed, conns, conn_key, method, gap_tolerance, progress, clock
+        )
     lower = min_fleet_size(
         float(np.linalg.norm(mission.goal.xy - mission.start.xy)),
         mission.safety_margin,
@@ -248,8 +250,11 @@ def _flown(invalid: MissionPlan, formation: LineFormation, cap_speed: bool) -> M
     )
 
 
-def route_problem(mission: Mission, method: str = "exact") -> RouteProblem:
-    """The planner's route problem for a stations mission (DESIGN 7)."""
+def route_problem(
+    mission: Mission, method: str = "exact", gap_tolerance: float = 0.0
+) -> RouteProblem:
+    """The planner's route problem for a stations mission (DESIGN 7); `gap_tolerance` ends
+    each leg's certification as `PathProblem.gap_tolerance` does."""
     return RouteProblem(
         start=mission.start.xy,
         points=np.array([point.xy for point in mission.stations]),
@@ -262,6 +267,7 @@ def route_problem(mission: Mission, method: str = "exact") -> RouteProblem:
         parking=mission.parking,
         fleet_size=mission.fleet.size,
         method=method,
+        gap_tolerance=gap_tolerance,
     )
 
 
@@ -271,13 +277,14 @@ def _plan_stations(
     conns: tuple[str, ...],
     conn_key: str,
     method: str,
+    gap_tolerance: float,
     progress: Callable[[SearchProgress], bool],
     clock: Callable[[], float],
 ) -> MissionPlan:
     """A stations mission: the route, its stations and the formation capped on them.
     An unreachable point is an input error naming it (unless the time limit stopped the
     search); a fixed `fleet.size` below the stations' minimum is refused."""
-    problem = route_problem(mission, method)
+    problem = route_problem(mission, method, gap_tolerance)
     fixed = mission.fleet.size
     size = fixed or 1
     first = first_leg(problem, size)

@@ -56,7 +56,8 @@ class RouteProblem:
     """A: `start`, theta_A (`start_angle_deg`, counter-clockwise from the direction A -> the
     first point visited); `points` (m, 2) and their `names` (for messages); `order` "tsp" or
     "given"; rho_c, rho_R, obstacles, parking mode, a fixed fleet size (None = the fewest the
-    stations need), method and caps as in `PathProblem` (the caps apply per leg)."""
+    stations need), method, caps and `gap_tolerance` as in `PathProblem` (they apply per leg:
+    each leg's certification ends once it is proven within the tolerance)."""
 
     start: np.ndarray
     points: np.ndarray
@@ -70,6 +71,7 @@ class RouteProblem:
     fleet_size: int | None = None
     method: str = "exact"
     max_expansions: int = 2_000_000
+    gap_tolerance: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "start", np.asarray(self.start, float).reshape(2))
@@ -115,6 +117,16 @@ class RoutePlan:
         """Every leg is proven the shortest valid one given the route before it."""
         return bool(self.legs) and all(leg.certified for leg in self.legs)
 
+    @property
+    def within_gap(self) -> bool:
+        """Not `certified`, but every leg is certified or proven within its gap tolerance."""
+        legs = self.legs
+        return (
+            not self.certified
+            and bool(legs)
+            and all(leg.certified or (leg.within_gap and not leg.stopped) for leg in legs)
+        )
+
     def path_plan(self) -> PathPlan:
         """The route as one `PathPlan` (level "route"), for what reports a path: the sums
         over the legs, and as lower bound the straight polyline through the points in
@@ -147,6 +159,7 @@ class RoutePlan:
             edge_count=sum(leg.edge_count for leg in legs),
             lower_bound_m=straight,
             stopped=self.stopped,
+            gap_tolerance=max((leg.gap_tolerance for leg in legs), default=0.0),
         )
 
 
@@ -302,6 +315,7 @@ def _leg_problem(
         fleet_size=size,
         method=problem.method,
         max_expansions=problem.max_expansions,
+        gap_tolerance=problem.gap_tolerance,
         start_tail=tail,
         open_goal=True,
     )

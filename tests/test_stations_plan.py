@@ -119,3 +119,37 @@ def test_more_uavs_than_needed_become_relays(tmp_path):
     gaps = -np.diff(np.concatenate([layout.stations, [0.0]]))
     assert np.all(gaps <= radio_spacing(5, 100) + 1e-6)
     assert np.all(gaps >= collision_spacing(5) - 1e-6)
+
+
+def test_gap_ends_the_certification_of_every_leg_of_a_stations_route(gcs_main, tmp_path):
+    """`--gap` applies to stations routes as to A -> B paths: each leg carries it."""
+    out = tmp_path / "plan.json"
+    code, _, err = gcs_main(
+        "mission", "plan", EXAMPLES / "stations.yaml", "--gap", "5", "--out", out
+    )
+    assert code == 0, err
+    assert json.loads(out.read_text())["gap_tolerance"] == pytest.approx(0.05)
+    plan = plan_mission(load_mission(EXAMPLES / "stations.yaml"), gap_tolerance=0.05)
+    assert plan.route is not None and len(plan.route.legs) == 4
+    assert all(leg.gap_tolerance == pytest.approx(0.05) for leg in plan.route.legs)
+
+
+def test_a_route_whose_legs_are_within_the_gap_says_so():
+    from dataclasses import replace
+
+    from gcs.cli.cmd_mission import certification_text
+
+    plan = plan_mission(load_mission(EXAMPLES / "stations.yaml"), gap_tolerance=0.05)
+    route = plan.route
+    assert route.certified and not route.within_gap
+    assert certification_text(plan.path_plan, route).startswith("every leg certified shortest")
+    first = route.legs[0]  # proven within 1 % of the shortest, not certified
+    near = replace(first, certified=False, lower_bound_m=0.99 * first.length_m)
+    within = replace(route, legs=(near, *route.legs[1:]))
+    assert within.within_gap and not within.certified
+    text = certification_text(within.path_plan(), within)
+    assert text.startswith("every leg within the --gap of 5 % or certified shortest")
+    far = replace(near, lower_bound_m=0.9 * first.length_m)  # 10 %: beyond the gap
+    outside = replace(route, legs=(far, *route.legs[1:]))
+    assert not outside.within_gap
+    assert certification_text(outside.path_plan(), outside).startswith("not every leg")

@@ -12,7 +12,7 @@ import json
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.table import Table
@@ -24,6 +24,9 @@ from gcs.planning import MissionPlan, mission_problem, plan_json, plan_mission
 from planner.numbers import fmt_against, plural
 from planner.search import SearchProgress
 from planner.types import PathPlan
+
+if TYPE_CHECKING:
+    from planner.route import RoutePlan
 
 #: Modules adding `gcs mission <command>`, each with `register(mission_subparsers)`.
 SUBCOMMANDS: tuple[str, ...] = ("gcs.cli.cmd_run",)
@@ -196,10 +199,13 @@ def progress_text(state: SearchProgress, elapsed: float) -> str:
     )
 
 
-def certification_text(pp: PathPlan) -> str:
-    """Whether the path is certified shortest under definition 4, else how far it may be."""
+def certification_text(pp: PathPlan, route: RoutePlan | None = None) -> str:
+    """Whether the path is certified shortest under definition 4, else how far it may be
+    (a stations route: whether each leg is, given the route before it)."""
     if pp.level == "route":
         legs = "every leg" if pp.certified else "not every leg"
+        if route is not None and route.within_gap:
+            legs = f"every leg within the --gap of {100 * pp.gap_tolerance:g} % or"
         gap = pp.length_m - pp.lower_bound_m
         return (
             f"{legs} certified shortest given the route before it (definition 4); "
@@ -315,7 +321,7 @@ def print_summary(console: Console, plan: MissionPlan, written: list[Path] | Non
         f"{plan.planning_time_s * 1000:.1f} ms, {pp.node_count} nodes, "
         f"{pp.edges_examined} edges examined, {pp.iterations} iterations, {pp.level} graph",
     )
-    table.add_row("shortest", certification_text(pp))
+    table.add_row("shortest", certification_text(pp, plan.route))
     for path in written or ():
         table.add_row("wrote", str(path))
     console.print(table)

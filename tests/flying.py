@@ -31,12 +31,9 @@ def flight_speedup(nominal: float) -> float:
     """The speed-up a test flight asks for: `nominal` when the machine has a core to spare,
     lower when it has not (`spare_cores`): on a busy machine a flight slows down, its
     guarantees (rho_c) stay what they are. At most 2.5 times lower, so that a flight still ends
-    in reasonable time. Under pytest-xdist (`make test` flies two test files at a time) each
-    worker counts on its share of the spare cores only: the other worker's flight may start
-    after the measurement."""
+    in reasonable time."""
     cores = os.cpu_count() or 1
-    workers = max(int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")), 1)
-    share = min(max(spare_cores() / (workers * max(cores - 1, 1)), 0.4), 1.0)
+    share = min(max(spare_cores() / max(cores - 1, 1), 0.4), 1.0)
     return round(nominal * share, 1)
 
 

@@ -54,6 +54,38 @@ def test_goal_distance_never_overestimates_and_is_consistent(seed):
     assert np.all(h[cache.src[:size]] <= cache.length[:size] + h[cache.dst[:size]] + 1e-6)
 
 
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+def test_goal_distance_over_the_rows_never_overestimates_and_is_consistent(seed):
+    """With a row filter, the heuristic is the exact distance to B over the edges the rows
+    and parking angles let through (each edge tested as the segment it is), never below the
+    unconstrained one, and consistent along those edges: what the walk and label searches
+    relax."""
+    world = random_buildings(40, seed=seed, size=800.0)
+    prob = scenario_problem(world, start_angle_deg=70.0, goal_angle_deg=110.0)
+    nodes = graph_nodes(prob)
+    cache = EdgeCache(prob, nodes, taut=True, prune_collinear=True)
+    rows = search._RowFilter(prob, prob.rows(4), nodes)
+    kept = search.goal_distance(cache, search._Budget(10**9), rows)
+    free = goal_distance(cache, search._Budget(10**9))
+    graph = nx.DiGraph()
+    for v in cache.members:
+        lo, hi = cache.edges(int(v))
+        for e in lo + np.flatnonzero(rows.mask(cache, int(v))):
+            graph.add_edge(int(cache.src[e]), int(cache.dst[e]), weight=float(cache.length[e]))
+    exact = nx.single_source_dijkstra_path_length(graph.reverse(), GOAL)
+    reached = np.array(sorted(exact))
+    truth = np.array([exact[v] for v in reached])
+    assert np.all(kept[reached] <= truth + 1e-6)
+    assert kept[START] == pytest.approx(exact[START])
+    assert np.all(kept >= free - 1e-9) and np.any(kept > free + 1e-6)  # the rows bind
+    size = cache.size
+    allowed = np.concatenate([rows.mask(cache, int(v)) for v in cache.members])
+    src, dst, length = cache.src[:size], cache.dst[:size], cache.length[:size]
+    order = np.concatenate([np.arange(*cache.edges(int(v))) for v in cache.members])
+    src, dst, length = src[order][allowed], dst[order][allowed], length[order][allowed]
+    assert np.all(kept[src] <= length + kept[dst] + 1e-6)
+
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_goal_distance_run_on_settles_every_node_below_the_key_and_stays_a_lower_bound(seed):
     prob = scenario_problem(random_buildings(40, seed=seed, size=800.0))
@@ -92,6 +124,8 @@ def test_nodes_out_of_b_s_reach_get_an_infinite_distance():
     outside = np.setdiff1d(cache.members, inside)
     assert len(outside) > 40 and np.all(np.isinf(goal.values[outside]))
     rows = search._RowFilter(prob, prob.rows(1), cache.nodes)
+    kept = search.heuristic_of(cache, search._Budget(10**9), rows)  # the rows' own bound
+    assert not kept.open and np.isinf(kept.values[START])
     budget = search._Budget(10**9)
     walk, status = search._walk_search(cache, rows, budget)
     assert walk is None and status == "exhausted" and budget.used == 1  # A's edges only

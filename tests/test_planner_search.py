@@ -13,7 +13,7 @@ from planner import search
 from planner.formation import SQRT2, collision_spacing, min_fleet_size, parking_rows
 from planner.graph import GOAL, KIND_OBSTACLE, KIND_ROW, START, edge_ok, graph_nodes
 from planner.obstacles import Obstacles
-from planner.scenarios import city_grid, paper_scenario, scenario_problem
+from planner.scenarios import city_grid, paper_scenario, random_buildings, scenario_problem
 from planner.search import plan_path
 from planner.validity import check_path
 from tests.planner_maps import RHO, problem, square
@@ -312,23 +312,41 @@ def test_taut_path_under_binding_constraints_is_checked_against_the_full_graph()
 
 
 def test_a_gap_tolerance_ends_the_certification_once_the_path_is_proven_within_it():
-    # Table II map, seed 37: the shortest valid path (1222.07 m) is 4.8 % longer than the
-    # unconstrained one; certifying it exactly takes a search of the full graph.
-    pb = scenario_problem(paper_scenario(seed=37))
+    # 30 random buildings (seed 6): the taut graph's valid path (567.3 m) is 3.4 % longer
+    # than the shortest walk that keeps the rows and parking angles (548.9 m, the bound at
+    # A); the shortest valid path (550.8 m) takes a search of the full graph.
+    pb = scenario_problem(random_buildings(30, seed=6, size=400.0))
     exact = plan_path(pb)
     assert exact.certified and exact.lower_bound_m == exact.length_m
-    assert exact.length_m == pytest.approx(1222.07, abs=0.01)
-    # 5 %: the unconstrained length already proves it; no full-graph search, not certified
+    assert exact.length_m == pytest.approx(550.785, abs=0.01)
+    # 5 %: the bound proves the taut path within it; no full-graph search, not certified
     loose = plan_path(replace(pb, gap_tolerance=0.05))
     assert_valid(loose, pb)
     assert not loose.certified and not loose.stopped and loose.gap_tolerance == 0.05
-    assert loose.length_m == pytest.approx(exact.length_m)
-    assert loose.length_m * 0.95 <= loose.lower_bound_m < exact.length_m
+    assert exact.length_m < loose.length_m <= loose.lower_bound_m / 0.95
+    assert loose.lower_bound_m <= exact.length_m
     assert loose.expansions < exact.expansions
-    # 2 %: the full graph holds no valid path 2 % shorter, which is the bound proven
+    # 2 %: the taut path is not within it: the full graph is searched, its path certified
     narrow = plan_path(replace(pb, gap_tolerance=0.02))
-    assert not narrow.certified and narrow.length_m == pytest.approx(exact.length_m)
-    assert exact.length_m * 0.98 - 1e-6 <= narrow.lower_bound_m < exact.length_m
+    assert narrow.certified and narrow.length_m == pytest.approx(exact.length_m)
+
+
+def test_a_path_only_the_rows_and_angles_lengthen_is_certified_without_the_full_graph():
+    """Table II map, seed 37: the shortest valid path (1222.07 m) is 4.8 % longer than the
+    shortest walk with no rule; the parking rows and angles account for all of it. The
+    heuristic keeps them (`GoalDistance` over the row filter's edges), so its value at A
+    proves the taut path shortest at once: no search of the full graph (the unconstrained
+    value left a 4.8 % gap to close that way)."""
+    pb = scenario_problem(paper_scenario(seed=37))
+    plan = plan_path(pb)
+    assert plan.certified and plan.level == "taut"
+    assert plan.length_m == pytest.approx(1222.07, abs=0.01)
+    planner = search._Planner(pb)
+    rows = search._RowFilter(pb, pb.rows(plan.fleet_size), planner.nodes)
+    taut = planner.cache("taut")
+    free = search.goal_distance(taut, search._Budget(10**9))[START]
+    kept = search.goal_distance(taut, search._Budget(10**9), rows)[START]
+    assert free < 0.96 * plan.length_m and kept == pytest.approx(plan.length_m)
 
 
 def test_gap_tolerance_is_a_fraction_below_one():

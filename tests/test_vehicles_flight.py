@@ -9,6 +9,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from fleetwire.modes import COPTER_MODE
 from tests.flying import flight_speedup
+from vehicles.dynamics import Disturbances
 from vehicles.testing import GroundStation, SmoothedPath, VehicleProcess, local_of
 
 # Every test here starts a process or flies over UDP.
@@ -207,7 +208,13 @@ def test_gcs_heartbeats_stop_the_vehicle_holds_then_lands(vehicle: GroundStation
     assert 1.9 <= land.vehicle_s - hold.vehicle_s <= 2.4
     gcs.wait_for(lambda: gcs.heartbeat_is(custom_mode=LAND), 5.0, "LAND in the heartbeat")
     gcs.wait_for(lambda: gcs.heartbeat_is(armed=False), 60.0, "landed and disarmed")
-    assert gcs.relative_altitude() < 0.5
+    on_ground = mavlink.MAV_LANDED_STATE_ON_GROUND
+    gcs.wait_for(
+        lambda: gcs.latest["EXTENDED_SYS_STATE"].landed_state == on_ground, 5.0, "on the ground"
+    )
+    # the reported altitude is the navigation estimate: on the ground, within its noise
+    # (a single sample above 0.5 m, 1.7 sigma, failed this test beside a CPU hog)
+    assert gcs.relative_altitude() < 4.0 * Disturbances().navigation_sigma_vertical_m
     assert gcs.text_matching("Disarming motors", texts)
 
 

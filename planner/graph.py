@@ -516,7 +516,6 @@ class EdgeCache:
         self.side_at_src = np.zeros(0)  # corner_side of each edge at its source
         self.side_at_dst = np.zeros(0)  # ... and at its destination
         self.radius: float | None = None
-        self.goal_distance = None  # the search heuristic (`search.GoalDistance`), once computed
         self._grid_bounds: tuple[float, float, float, float] | None = None
         self.occlusion = occlusion or Occlusion(nodes, problem.obstacles, problem.safety_margin)
         pts = nodes.points

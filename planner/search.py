@@ -254,7 +254,7 @@ class GoalDistance:
     no path from it can beat (its key is at least K). The values are consistent (they never
     drop by more than an edge's length along an edge), so a search may relax each edge once.
 
-    It first runs until it settles A, at the unconstrained length L (`values`), or, in an
+    It first runs until it settles A, at the relaxed length L (`values`), or, in an
     ellipse cache, until its keys reach the ellipse's size (A is then left at that bound,
     no shorter path exists: an ellipse searched in vain costs less); `extend`
     runs it on to a larger K, so the repair search, whose labels mostly lie on routes a few
@@ -346,17 +346,15 @@ class GoalDistance:
 
 
 def goal_distance(cache: EdgeCache, budget: _Budget, rows: _RowFilter | None = None) -> np.ndarray:
-    """The cache's `GoalDistance` values (computed once per cache and row filter, up to
-    settling A)."""
+    """The cache's `GoalDistance` values, up to settling A (see `heuristic_of`)."""
     return heuristic_of(cache, budget, rows).values
 
 
 def heuristic_of(cache: EdgeCache, budget: _Budget, rows: _RowFilter | None = None) -> GoalDistance:
-    if rows is not None:
-        return rows.heuristic(cache, budget)
-    if cache.goal_distance is None:
-        cache.goal_distance = GoalDistance(cache, budget)
-    return cache.goal_distance
+    """The searches' heuristic over `cache` for `rows`, computed once per cache and row
+    filter (`_RowFilter.heuristic`); without rows (every edge passes: the tests' yardstick)
+    a new one at each call."""
+    return GoalDistance(cache, budget) if rows is None else rows.heuristic(cache, budget)
 
 
 def _goes_straight(d_in: np.ndarray, dirs: np.ndarray, bend: np.ndarray) -> np.ndarray:
@@ -511,7 +509,7 @@ def _label_search(
     pts = nodes.points
     goal = heuristic_of(cache, budget, rows)
     heuristic = goal.values
-    unconstrained = float(heuristic[START])
+    relaxed = float(heuristic[START])  # the walk's length with the bend rule ignored
     pops = 0  # labels taken since the heuristic last ran on
     limit = _apart(problem)
     floor = -math.sin(ANGLE_TOLERANCE)
@@ -564,8 +562,8 @@ def _label_search(
                 # taken so far outnumber its settled nodes (a settled node may cost a tile of
                 # edges, a label little): run it on, the window past L doubling each time,
                 # then take the labels in their new order.
-                window = max(2.0 * (f - unconstrained), 2.0 * limit)
-                goal.extend(unconstrained + window, budget)
+                window = max(2.0 * (f - relaxed), 2.0 * limit)
+                goal.extend(relaxed + window, budget)
                 heuristic = goal.values
                 pops = 0
             fresh = lab_g[label] + float(heuristic[cache.dst[lab_edge[label]]])
@@ -1110,7 +1108,7 @@ class _Planner:
             if taut:
                 # Routes shorter than L over the taut graph, bends ignored (the full graph
                 # may have shorter ones: this only decides where to look).
-                free = self._unconstrained(cache, rows)
+                free = self._relaxed_length(cache, rows)
                 if free < length:  # routes shorter than L exist, none valid in the taut graph
                     full = _exact_level(self.problem, self.cache("full"), rows, self.budget, length)
                     if full.path is not None:
@@ -1214,7 +1212,7 @@ class _Planner:
         )
         return self._caches[key]
 
-    def _unconstrained(self, cache: EdgeCache, rows: _RowFilter) -> float:
+    def _relaxed_length(self, cache: EdgeCache, rows: _RowFilter) -> float:
         """The shortest walk A -> B over the cache's edges that `rows` let through, the bend
         rule and condition 5 ignored: the heuristic's value at A, a lower bound on every
         valid path in that graph."""
@@ -1229,9 +1227,9 @@ class _Planner:
         taut length L (`certify_cache`, complete candidate sets) holds every path shorter than
         L. A valid path as short as the shortest walk there that keeps the rows and parking
         angles (the heuristic's value at A, bends and condition 5 ignored) is the shortest:
-        no valid path can beat it. Otherwise that graph is searched for a valid path shorter than L: the one found is
-        certified if the search was exhaustive or it meets that value, and if there is none
-        the taut path is. A search cut short (cap or stop request) leaves the best proven
+        no valid path can beat it. Otherwise that graph is searched for a valid path shorter
+        than L: the one found is certified if the search was exhaustive or it meets that
+        value, and if there is none the taut path is. A search cut short (cap or stop request) leaves the best proven
         lower bound: that value, or the last f the bounded search reached.
 
         The taut graph's own unconstrained length is no such bound: the full graph's
@@ -1250,7 +1248,7 @@ class _Planner:
         full_cache = self.certify_cache(length)
         if full_cache is None:
             return taut, level, None
-        free = self._unconstrained(full_cache, rows)
+        free = self._relaxed_length(full_cache, rows)
         taut.lower_bound = max(self.straight, min(free, length))
         if length <= _at_most(free):
             taut.certified = True

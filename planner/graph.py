@@ -377,9 +377,16 @@ class Occlusion:
         one of the node's nearest obstacles (`ensure` them first)."""
         shadow = self.shadow[node]  # (k, _OCCLUDERS, 4): ref, low, high, far
         ref, low, high, far = (shadow[..., c] for c in range(4))
-        rel = np.mod(angle[:, None] - ref + math.pi, 2.0 * math.pi) - math.pi
-        inside = (rel > low + ANGLE_TOLERANCE) & (rel < high - ANGLE_TOLERANCE)
-        return np.any(inside & (length[:, None] > far + DISTANCE_TOLERANCE), axis=1)
+        # angle - ref lies in [-2 pi, 3 pi] (`angle` up to 2 pi for the far end): one turn
+        # added or taken brings it into [-pi, pi), cheaper than np.mod (3 pi gives pi,
+        # which like -pi lies inside no span)
+        rel = angle[:, None] - ref
+        rel -= (2.0 * math.pi) * (rel >= math.pi)
+        rel += (2.0 * math.pi) * (rel < -math.pi)
+        inside = rel > low + ANGLE_TOLERANCE
+        inside &= rel < high - ANGLE_TOLERANCE
+        inside &= length[:, None] > far + DISTANCE_TOLERANCE
+        return np.any(inside, axis=1)
 
     def pair_keys(self, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
         """One key per unordered node pair (the clearance test is symmetric)."""
@@ -528,7 +535,7 @@ class EdgeCache:
             self._target_tree = shapely.STRtree(shapely.points(pts[self.targets]))
         elif len(self.targets) > _SECTOR_REACH_TARGETS and len(problem.obstacles) > _OCCLUDERS:
             self.uses_sector_reach = True
-            self._reach = np.full((count, _SECTORS), np.inf)
+            self._reach_squared = np.full((count, _SECTORS), np.inf)
             self._reach_done = np.zeros(count, bool)
             self._target_xy: np.ndarray | None = None
         # Tiles: a square grid over the members, sized so a batch holds about _BATCH_PAIRS
@@ -668,28 +675,33 @@ class EdgeCache:
         if np.count_nonzero(self._reach_done[self.members]) >= _SPREAD * len(self.members):
             self._sector_reach(self.members)
         self._sector_reach(sources)
-        reach, known = self._reach, self._reach_done
+        reach, known = self._reach_squared, self._reach_done
         if self._target_xy is None:
             self._target_xy = np.ascontiguousarray(pts[self.targets].T)
         tx, ty = self._target_xy
-        # (sources, targets) arrays by broadcasting, rows in the order of `sources`
+        # (sources, targets) arrays by broadcasting, rows in the order of `sources`; squared
+        # lengths (no square root over every target)
         dx = tx[None, :] - pts[sources, 0][:, None]
         dy = ty[None, :] - pts[sources, 1][:, None]
-        length = np.hypot(dx, dy)
-        sector = (np.arctan2(dy, dx) + math.pi) * (_SECTORS / (2.0 * math.pi))
-        sector = sector.astype(np.int64) % _SECTORS
-        keep = length <= np.take_along_axis(reach[sources], sector, axis=1)
-        keep &= self.targets[None, :] != sources[:, None]
-        row, col = np.nonzero(keep)
+        squared = dx * dx
+        squared += dy * dy
+        sector = np.arctan2(dy, dx)
+        sector += math.pi
+        sector *= _SECTORS / (2.0 * math.pi)
+        # The direction pi (sector _SECTORS) goes to the last sector, whose closed span holds
+        # it (`_sector_reach` tests the closed sector), its reverse 0 to the one before 0's.
+        sector = np.minimum(sector.astype(np.intp), _SECTORS - 1)
+        row, col = np.nonzero(squared <= np.take_along_axis(reach[sources], sector, axis=1))
         src, dst = sources[row], self.targets[col]
         back = (sector[row, col] + _SECTORS // 2) % _SECTORS
-        ok = ~known[dst] | (length[row, col] <= reach[dst, back])
+        ok = (src != dst) & (~known[dst] | (squared[row, col] <= reach[dst, back]))
         return src[ok], dst[ok]
 
     def _sector_reach(self, index: np.ndarray) -> None:
-        """Fill `_reach` (nodes, `_SECTORS`), how far a node can see into each sector (see
-        `_visible_pairs`), for the nodes `index` not done yet. Sector k spans the angles
-        [-pi + k w, -pi + (k + 1) w), w = 2 pi / `_SECTORS`."""
+        """Fill `_reach_squared` (nodes, `_SECTORS`), the square of how far a node can see
+        into each sector (see `_visible_pairs`), for the nodes `index` not done yet. Sector k
+        spans the angles [-pi + k w, -pi + (k + 1) w), w = 2 pi / `_SECTORS`; a sector
+        counts as covered only when its closed span lies strictly inside a shadow."""
         index = index[~self._reach_done[index]]
         if len(index) == 0:
             return
@@ -705,7 +717,7 @@ class EdgeCache:
             reach = np.where(covers, far, np.inf).min(axis=1) + DISTANCE_TOLERANCE
             if self.taut:
                 reach = np.where(self._inside_cone(chunk, first, width), 0.0, reach)
-            self._reach[chunk] = reach
+            self._reach_squared[chunk] = reach * reach
 
     def _inside_cone(self, index: np.ndarray, first: np.ndarray, width: float) -> np.ndarray:
         """(k, sectors): sectors whose every direction is strictly inside node `index`'s

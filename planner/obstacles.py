@@ -21,10 +21,8 @@ class Obstacles:
     polygons: tuple[np.ndarray, ...] = ()
     walls: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
 
-    #: `segments_within` on obstacles of more than `UNION_VERTICES` vertices builds the
-    #: prepared union once this many segments were tested.
-    UNION_AFTER = 20_000
-    UNION_VERTICES = 200_000
+    #: `segments_within` builds the prepared union once this many segments were tested.
+    UNION_AFTER = 200_000
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_tested", [0])  # segments tested so far (a counter)
@@ -130,7 +128,6 @@ class Obstacles:
         if (
             self._tested[0] <= self.UNION_AFTER
             and "_prepared_union" not in self.__dict__
-            and len(self.vertices[0]) > self.UNION_VERTICES
         ):
             near, _ = self._tree.query(lines, predicate="dwithin", distance=distance)
             hit[near] = True  # (a solid is an area: a segment inside it is at distance 0)

@@ -116,8 +116,10 @@ class Obstacles:
         obstacle, or enters a solid one. Vectorised over a prepared union of the obstacles:
         segments that cross an obstacle are found by a cheap intersection test first, the
         exact distance test runs only on the others. The union of a city of footprints costs
-        seconds (over `UNION_VERTICES` vertices): its first `UNION_AFTER` segments query the
-        STRtree instead."""
+        half a second to seconds to build, and the STRtree answers about as fast per segment
+        (Bet Shemesh, 5,419 footprints: 4.3 us against 5.9 us; the union wins only on
+        segments hundreds of metres long): the first `UNION_AFTER` segments query the
+        STRtree, so a plan that tests fewer never builds the union."""
         segments = np.asarray(segments, float)
         flat = segments.reshape(-1, 2, 2)
         hit = np.zeros(len(flat), bool)
@@ -125,10 +127,7 @@ class Obstacles:
             return hit.reshape(segments.shape[:-2])
         lines = shapely.linestrings(flat)
         self._tested[0] += len(flat)
-        if (
-            self._tested[0] <= self.UNION_AFTER
-            and "_prepared_union" not in self.__dict__
-        ):
+        if self._tested[0] <= self.UNION_AFTER and "_prepared_union" not in self.__dict__:
             near, _ = self._tree.query(lines, predicate="dwithin", distance=distance)
             hit[near] = True  # (a solid is an area: a segment inside it is at distance 0)
             if self._wall_points is not None:  # GEOS skips a degenerate line: as points

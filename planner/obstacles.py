@@ -21,8 +21,10 @@ class Obstacles:
     polygons: tuple[np.ndarray, ...] = ()
     walls: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
 
-    #: `segments_within` builds the prepared union once this many segments were tested.
+    #: `segments_within` builds the prepared union once this many segments were tested, or
+    #: at once on obstacles of at most `UNION_VERTICES` vertices (it then costs milliseconds).
     UNION_AFTER = 200_000
+    UNION_VERTICES = 2_000
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_tested", [0])  # segments tested so far (a counter)
@@ -116,10 +118,11 @@ class Obstacles:
         obstacle, or enters a solid one. Vectorised over a prepared union of the obstacles:
         segments that cross an obstacle are found by a cheap intersection test first, the
         exact distance test runs only on the others. The union of a city of footprints costs
-        half a second to seconds to build, and the STRtree answers about as fast per segment
-        (Bet Shemesh, 5,419 footprints: 4.3 us against 5.9 us; the union wins only on
-        segments hundreds of metres long): the first `UNION_AFTER` segments query the
-        STRtree, so a plan that tests fewer never builds the union."""
+        half a second to seconds to build (over `UNION_VERTICES` vertices), and the STRtree
+        answers about as fast per segment (Bet Shemesh, 5,419 footprints: 4.3 us against
+        5.9 us; the union wins on segments hundreds of metres long across sparse obstacles,
+        200 random buildings: 2.3 us against 9.3 us): there the first `UNION_AFTER` segments
+        query the STRtree, so a plan that tests fewer never builds the union."""
         segments = np.asarray(segments, float)
         flat = segments.reshape(-1, 2, 2)
         hit = np.zeros(len(flat), bool)
@@ -127,7 +130,11 @@ class Obstacles:
             return hit.reshape(segments.shape[:-2])
         lines = shapely.linestrings(flat)
         self._tested[0] += len(flat)
-        if self._tested[0] <= self.UNION_AFTER and "_prepared_union" not in self.__dict__:
+        if (
+            self._tested[0] <= self.UNION_AFTER
+            and "_prepared_union" not in self.__dict__
+            and len(self.vertices[0]) > self.UNION_VERTICES
+        ):
             near, _ = self._tree.query(lines, predicate="dwithin", distance=distance)
             hit[near] = True  # (a solid is an area: a segment inside it is at distance 0)
             if self._wall_points is not None:  # GEOS skips a degenerate line: as points

@@ -626,6 +626,7 @@ def test_segments_are_tested_alike_before_and_after_the_prepared_union(monkeypat
     inside = rng.uniform([205.0, 25.0], [218.0, 38.0], (50, 2))  # in the first block
     starts[:50], ends[:50] = inside, inside + 2.0
     segments = np.stack([starts, ends], axis=1)
+    monkeypatch.setattr(Obstacles, "UNION_VERTICES", 0)  # as for a city of footprints
     fresh = Obstacles(polygons=obstacles.polygons, walls=obstacles.walls)
     tree = fresh.segments_within(segments, 5.0)
     assert "_prepared_union" not in fresh.__dict__

@@ -613,8 +613,8 @@ class EdgeCache:
         if len(row) == 0:
             return src, dst
         # Wedges: apex at the source, the octant's two bounding rays; targets inside them
-        # beyond the radius are the candidates. First out to 8 radii, then, for the wedges
-        # with fewer than _OCTANT_MIN targets that near, out of the map.
+        # beyond the radius are the candidates. First out to 2 radii, then 8, then, for the
+        # wedges with fewer than _OCTANT_MIN targets that near, out of the map.
         s_new, t_new = self._wedge_targets(sources[row], oct_)
         return np.concatenate([src, s_new]), np.concatenate([dst, t_new])
 
@@ -622,11 +622,14 @@ class EdgeCache:
         self, apex_nodes: np.ndarray, octant: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """For each (node, octant): the nearest _OCTANT_MIN targets in that octant beyond
-        the radius, looked for within 8 radii first, then at any distance."""
+        the radius (ties broken by target number), looked for within 2 radii first, then 8,
+        then at any distance: the STRtree returns every target in a wedge, and most wedges
+        find theirs within 2 radii (Bet Shemesh 11 km: 6.6 M targets returned for 4,650
+        wedges within 8 radii at once)."""
         pts = self.nodes.points
         s_all, t_all = [], []
         wedge = np.arange(len(apex_nodes))
-        for reach in (8.0 * self.radius, self._extent):
+        for reach in (2.0 * self.radius, 8.0 * self.radius, self._extent):
             a0 = -math.pi + octant[wedge] * (math.pi / 4.0)
             a1 = a0 + math.pi / 4.0
             apex = pts[apex_nodes[wedge]]
@@ -645,7 +648,7 @@ class EdgeCache:
             dist = np.hypot(d[:, 0], d[:, 1])
             inside = (_octant(d) == octant[wedge[w]]) & (dist > self.radius) & (dist <= reach)
             w, s_new, t_new, dist = w[inside], s_new[inside], t_new[inside], dist[inside]
-            order = np.lexsort((dist, w))
+            order = np.lexsort((t_new, dist, w))  # ties by target: the same at any reach
             w, s_new, t_new = w[order], s_new[order], t_new[order]
             pick = _rank_in_group(w) < _OCTANT_MIN
             found = np.bincount(w[pick], minlength=len(wedge))

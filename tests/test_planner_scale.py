@@ -13,6 +13,7 @@ import shapely
 
 import planner.graph as graph
 import planner.search as search
+from planner.formation import ANGLE_TOLERANCE, DISTANCE_TOLERANCE
 from planner.graph import GOAL, START, EdgeCache, graph_nodes
 from planner.obstacles import Obstacles, _cell_centres_inside
 from planner.scenarios import (
@@ -315,6 +316,83 @@ def test_a_row_of_touching_houses_hides_what_lies_behind_a_party_wall():
     alone.occluders = prob.obstacles  # the houses one by one
     alone.ensure(np.array([START]))
     assert not alone.in_shadow(np.array([START]), angle, length)[0]
+
+
+@pytest.mark.parametrize("world", ["random", "terraced"])
+def test_what_a_shadow_hides_is_blocked_seen_from_either_end(world):
+    """`Occlusion.in_shadow` is a culling before the exact test, so it must never hide a
+    clear segment: every node pair it blocks, seen from the source (angle in [-pi, pi]) or
+    from the far end (the reverse angle, up to 2 pi, wrapped by one turn), comes within
+    rho_c of an obstacle. It also blocks a fair share of the pairs, so the check bites."""
+    if world == "terraced":
+        prob = problem(
+            (-40.0, -30.0), (230.0, 150.0), Obstacles(polygons=terraced_rows(rows=4, columns=3))
+        )
+    else:
+        prob = scenario_problem(random_buildings(120, seed=9, size=800.0))
+    nodes = graph_nodes(prob)
+    occlusion = graph.Occlusion(nodes, prob.obstacles, prob.safety_margin)
+    rng = np.random.default_rng(12)
+    src = rng.integers(0, len(nodes), 40_000)
+    dst = rng.integers(0, len(nodes), 40_000)
+    keep = src != dst
+    src, dst = src[keep], dst[keep]
+    occlusion.ensure(np.unique(np.concatenate([src, dst])))
+    d = nodes.points[dst] - nodes.points[src]
+    angle, length = np.arctan2(d[:, 1], d[:, 0]), np.hypot(d[:, 0], d[:, 1])
+    ahead = occlusion.in_shadow(src, angle, length)
+    back = occlusion.in_shadow(dst, angle + math.pi, length)
+    segments = np.stack([nodes.points[src], nodes.points[dst]], axis=1)
+    close = prob.obstacles.segments_within(segments, prob.safety_margin - 1e-6)
+    assert np.all(close[ahead | back])
+    assert np.count_nonzero(ahead) > 0.2 * len(src) and np.count_nonzero(back) > 0.2 * len(src)
+    assert np.count_nonzero(back & ~ahead) > 0  # the far end's view adds its own
+    for node, toward, shadowed in ((src, angle, ahead), (dst, angle + math.pi, back)):
+        ref, low, high, far = np.moveaxis(occlusion.shadow[node], -1, 0)  # the definition:
+        rel = np.mod(toward[:, None] - ref + math.pi, 2.0 * math.pi) - math.pi  # [-pi, pi)
+        inside = (rel > low + ANGLE_TOLERANCE) & (rel < high - ANGLE_TOLERANCE)
+        inside &= length[:, None] > far + DISTANCE_TOLERANCE
+        assert np.array_equal(shadowed, inside.any(axis=1))  # no angle lost to the wrap
+
+
+@pytest.mark.parametrize(
+    "world, local, on_rays",
+    [
+        (lambda: random_buildings(400, seed=1, size=1500.0), 250, False),
+        (lambda: city_grid(14, 12, block=40.0, street=16.0), 40, True),
+    ],
+    ids=["random", "grid"],
+)
+def test_octant_completion_picks_the_nearest_targets_beyond_the_radius(world, local, on_rays):
+    """On a radius-limited graph each (node, octant) short of targets within the radius gets
+    its `_OCTANT_MIN` nearest targets in that octant beyond the radius, ties (a grid's)
+    going to the lower target number, whatever the search reach, targets on the octant's
+    bounding rays included: the same picks as sorting every target by distance."""
+    prob = scenario_problem(world())
+    cache = EdgeCache(
+        prob, graph_nodes(prob), taut=True, prune_collinear=True, local_candidates=local
+    )
+    assert cache.radius is not None
+    pts = cache.nodes.points
+    rng = np.random.default_rng(4)
+    apex = np.repeat(rng.choice(cache.members, 60, replace=False), 8)
+    octant = np.tile(np.arange(8), 60)
+    s, t = cache._wedge_targets(apex, octant)
+    got = {(int(v), int(o)): set() for v, o in zip(apex, octant, strict=True)}
+    for v, w in zip(s.tolist(), t.tolist(), strict=True):
+        got[(v, int(graph._octant((pts[w] - pts[v])[None])[0]))].add(w)
+    on_ray = 0
+    for v, o in zip(apex.tolist(), octant.tolist(), strict=True):
+        d = pts[cache.targets] - pts[v]
+        dist = np.hypot(d[:, 0], d[:, 1])
+        inside = (graph._octant(d) == o) & (dist > cache.radius)
+        targets, dist = cache.targets[inside], dist[inside]
+        order = np.lexsort((targets, dist))[: graph._OCTANT_MIN]
+        assert got[(v, o)] == set(targets[order].tolist())
+        turns = np.arctan2(*(pts[targets[order]] - pts[v]).T[::-1]) / (math.pi / 4.0)
+        on_ray += int(np.count_nonzero(np.abs(turns - np.round(turns)) < 1e-9))
+    assert sum(len(p) for p in got.values()) > 100
+    assert on_ray > 0 or not on_rays  # a grid's targets on an octant's bounding ray
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,5 @@
-"""Run every benchmark module (bench/bench_*.py, each with a `main()` that prints its table)."""
+"""Run every benchmark module (bench/bench_*.py, each with a `main()` that prints its table),
+after the machine's speed today (`bench.machine`)."""
 
 from __future__ import annotations
 
@@ -7,10 +8,12 @@ import pkgutil
 import sys
 
 import bench
+from bench import machine
 
 
 def main(argv: list[str]) -> int:
     wanted = set(argv)
+    machine.main()
     names = sorted(
         m.name for m in pkgutil.iter_modules(bench.__path__) if m.name.startswith("bench_")
     )

@@ -629,13 +629,14 @@ class EdgeCache:
         pts = self.nodes.points
         s_all, t_all = [], []
         wedge = np.arange(len(apex_nodes))
+        out = 1e-9  # rad
         for reach in (2.0 * self.radius, 8.0 * self.radius, self._extent):
-            # the octant's rays turned out by 1e-9 rad: a target on a ray (a grid's, along an
+            # the octant's rays turned out by `out`: a target on a ray (a grid's, along an
             # axis or a diagonal) lies inside the triangle, not a rounding error outside
-            a0 = -math.pi + octant[wedge] * (math.pi / 4.0) - 1e-9
-            a1 = a0 + math.pi / 4.0 + 2e-9
+            a0 = -math.pi + octant[wedge] * (math.pi / 4.0) - out
+            a1 = a0 + math.pi / 4.0 + 2.0 * out
             apex = pts[apex_nodes[wedge]]
-            side = reach / math.cos(math.pi / 8.0 + 1e-9)  # the triangle holds the sector
+            side = reach / math.cos(math.pi / 8.0 + out)  # the triangle holds the sector
             ring = np.stack(
                 [
                     apex,

@@ -324,12 +324,8 @@ def test_what_a_shadow_hides_is_blocked_seen_from_either_end(world):
     clear segment: every node pair it blocks, seen from the source (angle in [-pi, pi]) or
     from the far end (the reverse angle, up to 2 pi, wrapped by one turn), comes within
     rho_c of an obstacle. It also blocks a fair share of the pairs, so the check bites."""
-    if world == "terraced":
-        prob = problem(
-            (-40.0, -30.0), (230.0, 150.0), Obstacles(polygons=terraced_rows(rows=4, columns=3))
-        )
-    else:
-        prob = scenario_problem(random_buildings(120, seed=9, size=800.0))
+    random = random_buildings(120, seed=9, size=800.0)
+    prob = TERRACED if world == "terraced" else scenario_problem(random)
     nodes = graph_nodes(prob)
     occlusion = graph.Occlusion(nodes, prob.obstacles, prob.safety_margin)
     rng = np.random.default_rng(12)
@@ -343,7 +339,7 @@ def test_what_a_shadow_hides_is_blocked_seen_from_either_end(world):
     ahead = occlusion.in_shadow(src, angle, length)
     back = occlusion.in_shadow(dst, angle + math.pi, length)
     segments = np.stack([nodes.points[src], nodes.points[dst]], axis=1)
-    close = prob.obstacles.segments_within(segments, prob.safety_margin - 1e-6)
+    close = prob.obstacles.segments_within(segments, prob.safety_margin - DISTANCE_TOLERANCE)
     assert np.all(close[ahead | back])
     assert np.count_nonzero(ahead) > 0.2 * len(src) and np.count_nonzero(back) > 0.2 * len(src)
     assert np.count_nonzero(back & ~ahead) > 0  # the far end's view adds its own

@@ -84,6 +84,7 @@ def run_json(result: RunResult, log_path: str, safety_margin: float) -> dict[str
             }
             for s in result.stalls
         ],
+        "holds": [hold.to_json() for hold in result.holds],
         "telemetry_shed": result.telemetry_shed,
         "events": [
             {"t": _num(e.t), "level": e.level, "kind": e.kind, "text": e.text, "uav": e.uav}
@@ -110,11 +111,12 @@ def summary_renderable(result: RunResult, log_path: str, safety_margin: float) -
     top.add_row("duration", _fmt(result.duration_s, "s", 1) + " (first take-off to last landing)")
     top.add_row(
         "min UAV-UAV",
-        _fmt(result.min_uav_uav_m, "m") + _floor(2 * safety_margin, "2 rho_c", 2, result),
+        _fmt(result.min_uav_uav_m, "m") + _design(result.min_uav_uav_m, 2, result, safety_margin),
     )
     top.add_row(
         "min UAV-obstacle",
-        _fmt(result.min_uav_obstacle_m, "m") + _floor(safety_margin, "rho_c", 1, result),
+        _fmt(result.min_uav_obstacle_m, "m")
+        + _design(result.min_uav_obstacle_m, 1, result, safety_margin),
     )
     top.add_row(
         "max tracking error",
@@ -269,17 +271,46 @@ def _max(values: list[float | None]) -> float | None:
     return max(known) if known else None
 
 
-def _floor(target_m: float, name: str, uavs: int, result: RunResult) -> str:
-    """What the design promises a flown distance: the virtual targets keep `target_m` (the
-    plan's rho_c or 2 rho_c), and each of the `uavs` UAVs involved strays from its target by at
-    most the run's largest tracking error, so the distance stays above their difference
-    (DESIGN 3.4-3.5). Flying a corner at rho_c, a UAV is inside the margin by design."""
+def _design(measured: float | None, uavs: int, result: RunResult, safety_margin: float) -> str:
+    """What the design promises a flown distance, or that it promised nothing. The virtual
+    targets keep `uavs` x rho_c (rho_c from obstacles, 2 rho_c between two UAVs), and each of
+    the `uavs` UAVs involved strays from its target by at most the run's largest tracking error,
+    so the distance stays above their difference (DESIGN 3.4-3.5). Flying a corner at rho_c, a
+    UAV is inside the margin by design. The promise assumes every tracking error below rho_c:
+    when one reached it, or the `measured` distance is below the promise, the promise did not
+    hold, and the line says why and since when."""
+    target_m = uavs * safety_margin
+    name = "rho_c" if uavs == 1 else f"{uavs} rho_c"
     error = result.max_tracking_error_m
     if error is None:
         return f" (targets keep {name} = {target_m:g} m)"
     floor = target_m - uavs * error
     less = "tracking error" if uavs == 1 else f"{uavs} x tracking error"
+    if error >= safety_margin:  # then floor <= 0: no promise
+        return ": the guarantee did not hold: " + _tracking_breach(result, safety_margin)
+    if measured is not None and measured < floor:
+        return f": the guarantee did not hold: below {name} - {less} = {floor:.2f} m, time unknown"
     return f" (at least {name} - {less} = {floor:.2f} m by design)"
+
+
+def _tracking_breach(result: RunResult, safety_margin: float) -> str:
+    """Which UAV's tracking error reached `safety_margin`, its largest, and since when: the
+    first fatal tracking event's UAV and mission time; without one, the UAV with the largest
+    error, time unknown."""
+    breaches = [e for e in result.events if e.kind == "tracking" and e.level == "error"]
+    first = min(breaches, key=lambda e: e.t, default=None)
+    errors = {i + 1: e for i, e in enumerate(result.tracking_error_m) if e is not None}
+    uav = first.uav if first is not None else max(errors, key=errors.get, default=None)
+    error = errors.get(uav, result.max_tracking_error_m)
+    who = "a UAV's" if uav is None else f"UAV {uav}'s"
+    when = (
+        f"since t={first.t:.2f} s"
+        if first is not None and math.isfinite(first.t)
+        else "time of the first breach unknown"
+    )
+    return (
+        f"{who} tracking error reached {error:.2f} m >= safety margin {safety_margin:g} m, {when}"
+    )
 
 
 def _fmt(value: float | None, unit: str = "", digits: int = 2) -> str:

@@ -24,11 +24,12 @@ import socket
 import sys
 from collections.abc import Sequence
 
+from fleetwire.worldclock import WorldClockError
 from medium.calibration import DEFAULT_CALIBRATION, CalibrationTable, load_calibration
 from medium.ground_users import DEFAULT_PACKET_BYTES, DEFAULT_RATE_BPS, GroundUser
 from medium.medium import Medium, MediumConfig, MediumPortInUse, MediumUav
 from medium.radio import MODELS, RadioConfig
-from vehicles.cli import InputError, _home, _integer, _Parser, _positive
+from vehicles.cli import InputError, _home, _integer, _Parser, _positive, _world_clock
 from vehicles.sim import DEFAULT_ORIGIN
 
 PROG = "medium.cli"
@@ -126,6 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     add("--trace", help="write one JSON line per datagram to this file")
     add("--bind", default="127.0.0.1")
     add("--log-level", choices=("debug", "info", "warning", "error"), default="warning")
+    add("--world-clock", type=_world_clock, metavar="PATH",
+        help="lockstep: take the simulated time from this world clock file")  # fmt: skip
+    add("--world-slot", type=_integer("--world-slot", 0, 4096), default=0, metavar="K")
     return parser
 
 
@@ -167,6 +171,8 @@ def config_from_args(args: argparse.Namespace) -> MediumConfig:
         ground_users=tuple(_ground_users(args.ground_users)),
         packet_bytes=args.packet_bytes,
         report_period_s=args.report_period,
+        world_clock=args.world_clock,
+        world_slot=args.world_slot,
     )
 
 
@@ -182,6 +188,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     try:
         medium = Medium(config)
+    except WorldClockError as exc:
+        print(f"{PROG}: error: --world-clock: {exc}", file=sys.stderr)
+        return 2
     except MediumPortInUse as exc:
         print(f"{PROG}: error: --base-port: {exc.strerror}", file=sys.stderr)
         return 2

@@ -29,11 +29,13 @@ import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from fleetwire.frames import frames
+from fleetwire.worldclock import FollowerClock, WorldClockFollower
 from medium.ground_users import (
     DEFAULT_PACKET_BYTES,
     CbrTraffic,
@@ -50,6 +52,7 @@ log = logging.getLogger(__name__)
 MAX_DATAGRAM = 65535
 MAX_DATAGRAMS_PER_READ = 256
 RECEIVE_BUFFER_BYTES = 1 << 20
+_WORLD_POLL_S = 0.002  # longest wait (wall s) while the world clock holds the medium at its cap
 _SIM_STATE = mavlink.MAVLink_sim_state_message
 _SIM_STATE_FIELDS = {name: i for i, name in enumerate(_SIM_STATE.ordered_fieldnames)}
 _TOPOLOGY_MAX_AGE_S = 0.01  # simulated seconds a computed topology is reused for
@@ -85,6 +88,8 @@ class MediumConfig:
     sample_period_s: float = 0.1  # connectivity samples and ground-user sends (simulated s)
     report_period_s: float = 1.0  # simulated s
     position_horizon_s: float = 1.0
+    world_clock: Path | None = None  # lockstep with the run's world clock (fleetwire.worldclock)
+    world_slot: int = 0
 
 
 def sim_state_position(
@@ -248,7 +253,10 @@ class Medium:
         self._gcs: list[tuple[str, int] | None] = [None] * count
         self._delay = DelayLine()
         self._trace: Callable[[dict], None] | None = None
-        self._wall0 = time.monotonic()
+        world = None  # opened first: a bad file is refused before any socket is bound
+        if config.world_clock is not None:
+            world = WorldClockFollower(config.world_clock, config.world_slot)
+        self.clock = FollowerClock(config.speedup, time.monotonic(), world)
         self.sockets: list[socket.socket] = []
         self._selector = selectors.DefaultSelector()
         try:
@@ -274,14 +282,16 @@ class Medium:
         for sock in self.sockets:
             sock.close()
         self._selector.close()
+        self.clock.leave(time.monotonic())
 
     # ------------------------------------------------------------------ clock
     def sim_now(self, wall: float | None = None) -> float:
-        """Simulated seconds since the medium started."""
-        return ((time.monotonic() if wall is None else wall) - self._wall0) * self.config.speedup
+        """Simulated seconds since the medium started (the world's time plus an offset, once
+        the world clock runs: the medium never forwards ahead of the ground station)."""
+        return self.clock.now(time.monotonic() if wall is None else wall)
 
     def _wall_at(self, sim_s: float) -> float:
-        return self._wall0 + sim_s / self.config.speedup
+        return self.clock.wall_at(sim_s)
 
     # ------------------------------------------------------------------ the loop
     def run(
@@ -296,15 +306,20 @@ class Medium:
         model = self.model
         self._trace = trace
         next_report = cfg.report_period_s
+        clock = self.clock
         while not should_stop():
             now = time.monotonic()
+            clock.refresh(now)
             due = self._delay.next_due()
             wake = min(model.next_sample_s(), next_report, due)
             timeout = min(max(self._wall_at(wake) - now, 0.0), 0.1)
+            if clock.joined:  # the world may hold the medium at its cap: look again soon
+                timeout = min(timeout, _WORLD_POLL_S)
             for key, _ in self._selector.select(timeout):
                 self._read(key.data)
             sim_s = self.sim_now()
             self._deliver(sim_s)
+            clock.advanced_to(sim_s)
             model.periodic(sim_s)
             if sim_s >= next_report:
                 if report is not None:

@@ -23,49 +23,32 @@ from types import SimpleNamespace
 import yaml
 from mcap.reader import make_reader
 
+from gcs.sim.cpu import affordable_speedup
+from gcs.sim.cpu import spare_cores as measure_spare_cores
+
 REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "examples" / "small.yaml"
 
 
 def flight_speedup(nominal: float) -> float:
     """The speed-up a test flight asks for: `nominal` when the machine has a core to spare,
-    lower when it has not (`spare_cores`): on a busy machine a flight slows down, its
-    guarantees (rho_c) stay what they are. At most 2.5 times lower, so that a flight still ends
-    in reasonable time."""
-    cores = os.cpu_count() or 1
-    share = min(max(spare_cores() / max(cores - 1, 1), 0.4), 1.0)
-    return round(nominal * share, 1)
+    lower when it has not (`gcs.sim.cpu.affordable_speedup`, from `spare_cores`): on a busy
+    machine a flight slows down, its guarantees (rho_c) stay what they are."""
+    return affordable_speedup(nominal, spare_cores())
 
 
 _SPARE_CORES: list[tuple[float, float]] = []  # (when measured, spare cores): one per minute
 
 
 def spare_cores(window_s: float = 0.5, reuse_s: float = 60.0) -> float:
-    """Cores idle now: the share of CPU time /proc/stat counts idle over `window_s` (steal time,
-    a busy host's, counts as busy), times the cores; the 1-minute load average elsewhere. One
-    measurement serves every flight of the next `reuse_s` (a module's constants, its tests).
-    Measured, not averaged over the last minute: the fast tier that ran on every core just
-    before must not slow the flights down."""
+    """Cores idle now (`gcs.sim.cpu.spare_cores`). One measurement serves every flight of the
+    next `reuse_s` (a module's constants, its tests)."""
     now = time.monotonic()
     if _SPARE_CORES and now - _SPARE_CORES[-1][0] < reuse_s:
         return _SPARE_CORES[-1][1]
-    cores = os.cpu_count() or 1
-    try:
-        before = _cpu_times()
-        time.sleep(window_s)  # a measurement window, not a synchronisation
-        after = _cpu_times()
-        idle, total = (b - a for a, b in zip(before, after, strict=True))
-        spare = cores * idle / total if total > 0 else float(cores)
-    except (OSError, ValueError, IndexError):
-        spare = cores - os.getloadavg()[0]
+    spare = measure_spare_cores(window_s)
     _SPARE_CORES.append((now, spare))
     return spare
-
-
-def _cpu_times() -> tuple[int, int]:
-    """(idle + iowait, all) jiffies of every core since boot, from /proc/stat (Linux)."""
-    fields = [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:9]]
-    return fields[3] + fields[4], sum(fields)
 
 
 def gcs_command(*args: str) -> list[str]:

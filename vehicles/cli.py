@@ -17,6 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from fleetwire.messages import GCS_SYSTEM_ID
+from fleetwire.worldclock import WorldClockError, check_world_clock
 from vehicles.autopilot import AutopilotConfig, FailsafeConfig
 from vehicles.dynamics import Airframe, Disturbances, DynamicsConfig
 from vehicles.fleet_speed import LeaderRequest
@@ -191,6 +192,13 @@ def _signing_key(path: str) -> bytes:
         return read_key_file(path)
     except KeyFileError as exc:
         raise InputError(f"--signing-key-file: {exc}") from None
+
+
+def _world_clock(path: str) -> Path:
+    try:
+        return check_world_clock(path)
+    except WorldClockError as exc:
+        raise InputError(f"--world-clock: {exc}") from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -380,6 +388,20 @@ def build_parser() -> argparse.ArgumentParser:
         "disarmed",
     )
     add(
+        "--world-clock",
+        type=_world_clock,
+        metavar="PATH",
+        help="lockstep: take the simulated time from this world clock file (written by the "
+        "ground station that started this process; fleetwire.worldclock)",
+    )
+    add(
+        "--world-slot",
+        type=_integer("--world-slot", 0, 4096),
+        default=0,
+        metavar="K",
+        help="this process's slot in the world clock file (0)",
+    )
+    add(
         "--exit-when-orphaned",
         nargs="?",
         const=0,
@@ -484,6 +506,8 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         leader_sysid=leader if args.leader_requests else None,
         leader_requests=args.leader_requests,
         signing_key=args.signing_key,
+        world_clock=args.world_clock,
+        world_slot=args.world_slot,
     )
 
 
@@ -499,6 +523,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     try:
         simulation = Simulation(config)
+    except WorldClockError as exc:
+        print(f"{PROG} sim: error: --world-clock: {exc}", file=sys.stderr)
+        return 2
     except PortInUseError as exc:
         print(f"{PROG} sim: error: --base-port: {exc.strerror}", file=sys.stderr)
         return 2
@@ -527,7 +554,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         orphan = None
         if args.exit_when_orphaned is not None:
             orphan = OrphanExit(simulation.autopilots, args.exit_when_orphaned or None)
-        stats = simulation.run(lambda: stop or (orphan is not None and orphan()))
+
+        def should_stop() -> bool:
+            done = stop or (orphan is not None and orphan())
+            if orphan is not None and orphan.orphaned:
+                simulation.leave_world()  # no ground station to wait for: failsafes on
+            return done
+
+        stats = simulation.run(should_stop)
     finally:
         simulation.close()
     print(

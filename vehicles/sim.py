@@ -10,6 +10,14 @@ of flying on stale setpoints, over as many wake-ups as the catching up takes (a 
 the wake-up whose steps reach its arrival). If the process falls more than ``max_lag_s`` (wall
 clock) behind, the simulated clock slips instead of racing to catch up, and every vehicle
 reports it.
+
+With a world clock (``SimConfig.world_clock``, `fleetwire.worldclock`) the simulated clock is
+the world's once the ground station's mission clock runs: it never passes the ground station's
+last tick by more than a lead (a stopped ground station pauses these vehicles instead of
+letting their setpoint timeouts fire), it reports how far it has got (a starved vehicle process
+makes the ground station wait instead of tearing the formation), and it never slips. Orphaned
+(the ground station gone), it runs on the wall clock again: the failsafes bring the vehicles
+down.
 """
 
 from __future__ import annotations
@@ -19,9 +27,11 @@ import selectors
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from fleetwire.worldclock import FollowerClock, WorldClockFollower
 from vehicles.autopilot import Autopilot, AutopilotConfig, Stamp
 from vehicles.dynamics import DynamicsConfig, FleetDynamics
 from vehicles.fleet_speed import LeaderRequest
@@ -36,6 +46,8 @@ DEFAULT_ORIGIN = GeodeticOrigin(45.7640, 4.8357, 170.0)
 _EPOLL_RESOLUTION_S = 0.001
 _MAX_TICKS_PER_WAKE = 10
 _SLIP_REPORT_INTERVAL_S = 5.0
+#: Longest wait (wall s) while the world clock holds this process at its cap.
+_WORLD_POLL_S = 0.002
 
 
 @dataclass(frozen=True)
@@ -66,6 +78,8 @@ class SimConfig:
     control_rate_hz: float = 50.0
     max_lag_s: float = 5.0
     signing_key: bytes | None = None  # MAVLink 2 signing for every vehicle (see link.make_codec)
+    world_clock: Path | None = None  # the run's world clock file (fleetwire.worldclock)
+    world_slot: int = 0  # this process's slot in it
 
 
 @dataclass(frozen=True)
@@ -91,6 +105,9 @@ class Simulation:
     def __init__(self, config: SimConfig) -> None:
         self.config = config
         self.links: list[VehicleLink] = []
+        world = None  # opened first: a bad file is refused before any socket is bound
+        if config.world_clock is not None:
+            world = WorldClockFollower(config.world_clock, config.world_slot)
         try:
             for spec in config.vehicles:
                 self.links.append(
@@ -127,7 +144,7 @@ class Simulation:
         step_s = config.dynamics.step_s
         self._steps_per_tick = max(1, round(1.0 / (config.control_rate_hz * step_s)))
         self._steps = 0
-        self._wall0 = 0.0
+        self.clock = FollowerClock(config.speedup, 0.0, world)
         self._slip_unreported = 0.0
         self._slip_reported_wall = float("-inf")
         self._waiting: list[Arrival] = []  # read, not yet due (the clock is catching up)
@@ -137,13 +154,21 @@ class Simulation:
             link.close()
         if hasattr(self, "_selector"):
             self._selector.close()
+        if hasattr(self, "clock"):
+            self.clock.leave(time.monotonic())
+
+    def leave_world(self) -> None:
+        """Run on the wall clock from now on (the ground station is gone)."""
+        if self.clock.world is not None:
+            log.warning("ground station gone: the vehicles leave the world clock")
+            self.clock.leave(time.monotonic())
 
     def sim_time(self) -> float:
         return self._steps * self.config.dynamics.step_s
 
     def _sim_now(self, wall: float) -> float:
         """The exact simulated time at wall-clock ``wall`` (between steps)."""
-        return (wall - self._wall0) * self.config.speedup
+        return self.clock.now(wall)
 
     def run(self, should_stop: Callable[[], bool]) -> SimStats:
         """Run until ``should_stop()`` is true (checked at every wake-up)."""
@@ -153,17 +178,22 @@ class Simulation:
         max_lag_steps = max(self._steps_per_tick, int(cfg.max_lag_s * cfg.speedup / step_s))
         max_steps_per_wake = _MAX_TICKS_PER_WAKE * self._steps_per_tick  # stay responsive
         start = time.monotonic()
-        self._wall0 = start - self.sim_time() / cfg.speedup
+        clock = self.clock
+        clock.wall0 = start - self.sim_time() / cfg.speedup
         while not should_stop():
             self.stats.wakeups += 1
             now = time.monotonic()
-            due = int(self._sim_now(now) / step_s)
-            if due - self._steps > max_lag_steps:
+            clock.refresh(now)
+            due = max(int(self._sim_now(now) / step_s), self._steps)
+            if due - self._steps > max_lag_steps and not clock.joined:
                 self._slip(due - self._steps - max_lag_steps, now)
                 due = self._steps + max_lag_steps
             self.advance(min(due, self._steps + max_steps_per_wake), self._receive())
+            clock.advanced_to(self.sim_time())
             next_tick = (self._steps // self._steps_per_tick + 1) * tick_s
-            wait = self._wall0 + next_tick / cfg.speedup - time.monotonic()
+            wait = clock.wall_at(next_tick) - time.monotonic()
+            if clock.joined:  # the world may hold us at its cap: look again soon
+                wait = min(wait, _WORLD_POLL_S)
             if wait > _EPOLL_RESOLUTION_S:  # epoll rounds up to whole milliseconds
                 self._selector.select(wait - _EPOLL_RESOLUTION_S)
             elif wait > 0:
@@ -177,7 +207,7 @@ class Simulation:
         every few seconds of wall clock, with the total since the last report)."""
         cfg = self.config
         seconds = steps * cfg.dynamics.step_s
-        self._wall0 += seconds / cfg.speedup
+        self.clock.wall0 += seconds / cfg.speedup
         self._waiting = [  # the messages still to come keep their place on the slipped clock
             Arrival(Stamp(a.stamp.sim_s - seconds, a.stamp.wall_s), a.vehicle, a.message)
             for a in self._waiting

@@ -95,6 +95,13 @@ def register(mission_commands: argparse._SubParsersAction) -> None:
         "signing.key_file, is signed with MAVLink 2 signing): said loudly, and logged",
     )
     run.add_argument(
+        "--no-lockstep",
+        dest="lockstep",
+        action="store_false",
+        help="simulated fleet above speed-up 1: the vehicles and the radio medium run on the wall "
+        "clock, as real vehicles would, instead of taking their time from the ground station",
+    )
+    run.add_argument(
         "--link-wait",
         type=float,
         default=10.0,
@@ -331,7 +338,12 @@ def run_command(args: argparse.Namespace) -> int:
             )
 
         run = GroundStation(plan, drivers, clock, recorder, options, view=view, replan=replan)
-        loop = LiveLoop(run, fleet=fleet, operator=operator, forwarder=forwarder)
+        world = None
+        if isinstance(fleet, SimFleet) and fleet.world is not None:
+            from gcs.flight.lockstep import WorldSync
+
+            world = WorldSync(fleet.world, fleet.world_slots())
+        loop = LiveLoop(run, fleet=fleet, operator=operator, forwarder=forwarder, world=world)
         previous = signal.getsignal(signal.SIGINT)
 
         def on_sigint(signum, frame):
@@ -350,6 +362,7 @@ def run_command(args: argparse.Namespace) -> int:
         result = loop.run()
         data = run_json(result, str(log_path), mission.safety_margin)
         data["signing"] = signing.summary()
+        data["lockstep"] = world.summary() if world is not None else {"enabled": False}
         recorder.outcome(data)
         if result.limits_refused:  # before take-off: the mission, not the flight, was wrong
             refused = result.limits_refused[0]
@@ -384,6 +397,7 @@ def sim_setup(mission, formation, args, leaders, log_path: Path) -> SimVehicleSe
         navigation_noise_m=noise.position_m,
         battery_mah=mission.sim.battery_capacities(len(formation.start_slots)),
         leaders=leaders,
+        lockstep=getattr(args, "lockstep", True),
         log_dir=log_path.parent / (log_path.stem + "-vehicles")
         if getattr(args, "verbose", 0)
         else None,

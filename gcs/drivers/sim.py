@@ -12,9 +12,11 @@ vehicle honours.
 from __future__ import annotations
 
 import logging
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,6 +24,7 @@ import numpy as np
 
 from fleetwire.messages import MISSION_TIME_NAME, encode_mission_time
 from fleetwire.modes import COPTER_MODE, COPTER_MODE_NAME
+from fleetwire.worldclock import WorldClockMaster
 from gcs.drivers.base import CommandSpec, Driver, Fleet, FleetProblem, FlightMode
 from gcs.geodesy import Origin
 from gcs.link import mavutil
@@ -121,6 +124,13 @@ class SimVehicleSetup:
     extra_args: tuple[str, ...] = ()
     log_dir: Path | None = None  # where each process's stderr goes (None: discarded)
     radio: MediumSetup | None = None  # links through the radio medium (gcs.sim.radio); None: direct
+    #: lockstep: the vehicles and the medium take their time from the ground station's mission
+    #: clock (fleetwire.worldclock) when the speed-up is above 1; False: the wall clock
+    lockstep: bool = True
+
+    @property
+    def in_lockstep(self) -> bool:
+        return self.lockstep and self.speedup > 1
 
     def groups(self) -> list[list[int]]:
         """UAV indexes (0-based) per process: runs of consecutive UAVs (a process numbers its
@@ -149,6 +159,9 @@ class SimFleet(Fleet):
 
     def __init__(self, setup: SimVehicleSetup) -> None:
         self.setup = setup
+        #: the world clock the processes follow (lockstep), slot k = process k, the medium last
+        self.world: WorldClockMaster | None = None
+        self._world_dir: Path | None = None
         self.processes: list[subprocess.Popen] = []
         self.groups: list[tuple[int, ...]] = []  # UAV ids (1-based) of each process
         self.ports: dict[int, int] = {}  # UAV id -> UDP port
@@ -156,7 +169,12 @@ class SimFleet(Fleet):
         self.medium: MediumProcess | None = None
 
     def start(self) -> list[str]:
-        for group in self.setup.groups():
+        groups = self.setup.groups()
+        if self.setup.in_lockstep:
+            self._world_dir = Path(tempfile.mkdtemp(prefix="fleetline-world-"))  # owner-only
+            slots = len(groups) + (self.setup.radio is not None)
+            self.world = WorldClockMaster(self._world_dir / "clock", slots, self.setup.speedup)
+        for group in groups:
             port = free_udp_ports(len(group), self.host)
             for i, k in enumerate(group):
                 self.ports[k + 1] = port + i
@@ -177,8 +195,20 @@ class SimFleet(Fleet):
             sysid_base=s.sysid_base,
             speedup=s.speedup,
             origin=s.origin,
+            extra_args=self._world_args(len(self.processes)),
             stderr_path=s.log_dir / "medium.log" if s.log_dir is not None else None,
         )
+
+    def _world_args(self, slot: int) -> tuple[str, ...]:
+        """The command-line flags of a process following the world clock in `slot`."""
+        if self.world is None:
+            return ()
+        return ("--world-clock", str(self.world.path), "--world-slot", str(slot))
+
+    def world_slots(self) -> list[str]:
+        """Who follows the world clock, by slot: each vehicle process, then the medium."""
+        names = [f"vehicle process of UAV {', '.join(map(str, uavs))}" for uavs in self.groups]
+        return names + (["radio medium"] if self.setup.radio is not None else [])
 
     def radio_reports(self) -> list[dict]:
         """The radio medium's reports since the last call (none without a medium)."""
@@ -223,7 +253,8 @@ class SimFleet(Fleet):
         if len(group) == 1 and group[0] + 1 in s.leaders:
             requests = ",".join(f"{at:g}:{speed:g}" for at, speed in s.leaders[group[0] + 1])
             cmd += ["--leader-requests", requests, "--leader-sysid", str(s.sysid_base + group[0])]
-        return cmd + list(s.extra_args)
+        slot = len(self.processes)  # the process about to start
+        return cmd + list(s.extra_args) + list(self._world_args(slot))
 
     def poll(self) -> list[FleetProblem]:
         problems = []
@@ -231,6 +262,8 @@ class SimFleet(Fleet):
             code = process.poll()
             if code is not None and index not in self._reported:
                 self._reported.add(index)
+                if self.world is not None:
+                    self.world.release(index)  # nobody waits for a process that exited
                 uavs = self.groups[index]
                 who = ", ".join(map(str, uavs))
                 text = f"vehicle process of UAV {who} (pid {process.pid}) exited with {code}"
@@ -238,6 +271,8 @@ class SimFleet(Fleet):
         code = self.medium.exit_code() if self.medium is not None else None
         if code is not None and -1 not in self._reported:
             self._reported.add(-1)
+            if self.world is not None:
+                self.world.release(len(self.processes))
             text = f"radio medium (pid {self.medium.process.pid}) exited with {code}"
             problems.append(FleetProblem(text, tuple(sorted(self.ports))))
         return problems
@@ -258,6 +293,12 @@ class SimFleet(Fleet):
         for process in self.processes:
             if process.stderr is not None and not process.stderr.closed:
                 process.stderr.close()
+        if self.world is not None:
+            self.world.close()
+            self.world = None
+        if self._world_dir is not None:
+            shutil.rmtree(self._world_dir, ignore_errors=True)
+            self._world_dir = None
 
     def _spawn(self, group: list[int], port: int) -> subprocess.Popen:
         cmd = self.vehicle_command(group, port)

@@ -37,6 +37,7 @@ class MissionClock:
         self._floor = -float("inf")  # the clock never reads below this again
         self._frozen_at: float | None = None  # mission time it stands at, while frozen
         self.epoch_ns: int | None = None  # Unix ns at mission time 0
+        self.held_back_s = 0.0  # mission seconds `hold_back` took off the clock, in all
 
     @property
     def anchored(self) -> bool:
@@ -82,6 +83,22 @@ class MissionClock:
         self._floor = resumed
         self._frozen_at = None
         return resumed
+
+    def hold_back(self, now: float, mission_time: float) -> float:
+        """Make the clock read `mission_time` at `now` and run on from there (lockstep: the
+        world it drives is behind). Never below what it read at its last use (the floor of a
+        resume, or what the caller passes: its last tick); returns the mission seconds taken
+        off the clock."""
+        if self._frozen_at is not None:
+            return 0.0
+        before = self.mission_time(now)
+        value = max(mission_time, self._floor)
+        if value >= before:
+            return 0.0
+        self._zero = now - value / self.speedup
+        self._floor = value
+        self.held_back_s += before - value
+        return before - value
 
     def log_time_ns(self, now: float) -> int:
         return self.epoch_ns + int(round(self.mission_time(now) * 1e9))

@@ -63,6 +63,7 @@ import numpy as np
 from gcs.drivers.base import Driver, DriverEvent, Phase
 from gcs.drivers.limits import LimitExceeded, exceeded
 from gcs.flight.clock import MissionClock, VehicleClock, paused
+from gcs.flight.hold import Hold, HoldPolicy, UavState
 from gcs.flight.records import (
     MetricsRecord,
     RadioRecord,
@@ -276,6 +277,7 @@ class RunResult:
     #: The mission assumed more than an autopilot allows and was refused before take-off.
     limits_refused: list[LimitExceeded] = field(default_factory=list)
     stations: StationsResult | None = None  # stations missions only
+    holds: list[Hold] = field(default_factory=list)  # the formation held for a UAV behind
 
 
 class View(Protocol):
@@ -429,10 +431,19 @@ class GroundStation:
         self.ticks = 0
         self.radio_report: dict | None = None  # the radio medium's last report
         self._last_awake: float | None = None  # the last tick (or the end of a stall)
+        self._last_awake_t: float | None = None  # ... and its mission time
         self._pending_stall: float | None = None  # a stall found by `tick`, resumed by `receive`
         self.stalls: list[Stall] = []
         self.tracking_now = np.full(size, np.nan)
+        self._heard_t = np.full(size, np.nan)  # mission time of each UAV's last valid message
         self.mission_time = None
+        # the hold policy (gcs.flight.hold): the formation stops for a UAV that fell behind
+        self.holds = HoldPolicy.for_budget(
+            self.mission.safety_margin,
+            self.mission.vehicle.tracking_allowance,
+            options.link_wait_s,
+        )
+        self._hold_speed = 0.0  # the speed the formation resumes with after the hold
         # stations missions
         self.returned: ReturnRecord | None = None  # the return home, once asked
         self._hold: tuple[float, float] | None = None  # stopped on station: (from t, speed)
@@ -513,6 +524,11 @@ class GroundStation:
         """Bound of |smoothed reference - V_n| for the profile flown so far (DESIGN 3.5)."""
         return float(smoothing_error_bound(self.formation, self.profile, self.window_s))
 
+    def note(self, level: str, kind: str, text: str, now: float) -> None:
+        """Something the loop noticed that belongs in the run's events (e.g. lockstep)."""
+        t = self.clock.mission_time(now) if self.clock.anchored else 0.0
+        self._event(MonitorEvent(t, level, kind, text), now)
+
     def interrupt(self) -> None:
         """Ctrl-C (from a signal handler: only counts; the next tick acts on it)."""
         self.interrupts += 1
@@ -524,6 +540,7 @@ class GroundStation:
         self.aborting = True
         self.reason = self.reason or reason
         self._abort_time = self.clock.mission_time(now) if self.clock.anchored else 0.0
+        self.holds.end(self._abort_time, "landed")
         self._event(
             MonitorEvent(self._abort_time, "error", "abort", f"landing everyone: {reason}"), now
         )
@@ -565,6 +582,7 @@ class GroundStation:
                 return verdict
         self.clock.anchor(now, -self.takeoff_lead_s())
         self._last_awake = now
+        self._last_awake_t = -self.takeoff_lead_s()
         bound, budget = self.smoothing_bound(), self.mission.error_budget
         if bound > budget:
             self._event(
@@ -650,6 +668,8 @@ class GroundStation:
                 if stalled_since is not None:
                     self.clock.freeze(stalled_since)
             driver = self.drivers[index]
+            if messages and self.clock.anchored:
+                self._heard_t[index] = self.clock.mission_time(received)
             for msg in messages:
                 driver.on_message(msg, received)
                 kind = msg.get_type()
@@ -759,6 +779,7 @@ class GroundStation:
         self.ticks += 1
         self._last_awake = now
         t = self.clock.mission_time(now)
+        self._last_awake_t = t
         self.mission_time = t
         self._handle_interrupts(now)
         self._handle_requests(t, now)
@@ -776,6 +797,7 @@ class GroundStation:
         if self._station_xy is not None:
             sampled = self.safety.stats.samples > samples
             self._watch_stations(t, now, evaluation, sampled)
+        self._hold_policy(t, now)
         self._link_policy(t, now)
 
     def finished(self, now: float) -> bool:
@@ -789,12 +811,19 @@ class GroundStation:
     def _stalled_since(self, now: float) -> float | None:
         """The time of the last tick (the last setpoints sent), if the loop stalled since (the
         process was stopped or starved of CPU for a setpoint timeout of mission time); else
-        None."""
+        None. The gap is counted on the mission clock: in lockstep the simulated world stood
+        still with the ground station (the clock held back: `gcs.flight.lockstep`), and a
+        stall the world did not fly is none."""
         last = self._last_awake
         if last is None or not self.clock.anchored:
             return None
         gap = now - last
-        if gap * self.options.speedup < STALL_S or gap < STALL_WALL_FLOOR_S:
+        if gap < STALL_WALL_FLOOR_S:
+            return None
+        if self._last_awake_t is not None:
+            if self.clock.raw_mission_time(now) - self._last_awake_t < STALL_S:
+                return None
+        elif gap * self.options.speedup < STALL_S:
             return None
         return last
 
@@ -825,6 +854,7 @@ class GroundStation:
         held_back = t_now - resumed_at  # negative: the inserted pause is longer than the stall
         self.clock.resume(now, resumed_at)
         self._last_awake = now
+        self._last_awake_t = resumed_at
         if abs(held_back) > 1e-3:
             for clock in self._vehicle_clocks:
                 clock.pause(resumed_at, held_back)
@@ -1240,6 +1270,14 @@ class GroundStation:
             )
             self._event(MonitorEvent(t, "warning", "speed_deferred", text), now)
             return True
+        if self.holds.holding:
+            self._hold_speed = speed
+            text = (
+                f"{source}: {speed:g} m/s deferred, the formation holds for a UAV behind; "
+                "it resumes at that speed"
+            )
+            self._event(MonitorEvent(t, "warning", "speed_deferred", text), now)
+            return True
         if self.frozen_by is None:
             return False
         self._resume_speed = speed
@@ -1300,6 +1338,9 @@ class GroundStation:
 
     def _apply(self, change: SpeedChange, now: float) -> None:
         """The formation takes the change at its effective time; broadcast it to every UAV."""
+        if self.holds.holding and not change.source.startswith("freeze:"):
+            t = self.clock.mission_time(now)
+            self._hold_ended(t, "operator" if change.source == "operator" else "superseded", now)
         self.profile = self.profile.with_change(change.effective_s, change.speed)
         record = self.speeds.record(change, now)
         for driver in self.drivers:
@@ -1334,6 +1375,9 @@ class GroundStation:
             return
         t = self.clock.mission_time(now)
         self._resume_speed = float(self.profile.speed_at(self.speeds.earliest(t)))
+        if self.holds.holding:  # the freeze takes over: it resumes at the hold's speed
+            self._resume_speed = self._hold_speed
+            self._hold_ended(t, "superseded", now)
         self.frozen_by = why
         self._issue(0.0, t, f"freeze:{why}", now)
 
@@ -1636,6 +1680,10 @@ class GroundStation:
         out_of_fleet = None if excluded is None else [int(i) + 1 for i in np.flatnonzero(excluded)]
         self.recorder.fleet(t, fleet, evaluation.virtual[0], now)
         silent = np.array([d.link.silent_for(now) for d in self.drivers])
+        # silence the mission clock did not count is none (lockstep held it back: the world
+        # stood still, the UAVs too)
+        heard = np.isfinite(self._heard_t)
+        silent[heard] = np.minimum(silent[heard], (t - self._heard_t[heard]) / self.options.speedup)
         timeout = max(
             self.options.link_timeout_s / self.options.speedup, self.options.link_wall_floor_s
         )
@@ -1662,9 +1710,81 @@ class GroundStation:
                     # the sample the monitors checked: `gcs log report` re-checks it
                     positions=[None if math.isnan(p[0]) else p for p in recorded.tolist()],
                     out_of_fleet=out_of_fleet,
+                    holding=list(self.holds.current.uavs) if self.holds.holding else None,
+                    world_held_s=self.clock.held_back_s or None,
                 ),
                 now,
             )
+
+    # ------------------------------------------------------------------ holds
+    def _uav_states(self) -> list[UavState]:
+        """What the hold policy reads of each UAV now (a UAV whose link is lost is the link
+        policy's, not following here)."""
+        lost = self.links.lost
+        return [
+            UavState(
+                index=i,
+                following=driver.phase == Phase.FOLLOWING and not lost[i],
+                tracking_error_m=float(self.tracking_now[i]),
+                sample_time=self.tracks[i].last_sample_time,
+            )
+            for i, driver in enumerate(self.drivers)
+        ]
+
+    def _hold_policy(self, t: float, now: float) -> None:
+        """Hold the formation for a UAV behind, resume once everyone is back, land everyone
+        when the hold does not restore the budget (`gcs.flight.hold`)."""
+        policy = self.holds
+        states = self._uav_states()
+        if self.aborting or self._holding():
+            return  # landing, or a stations fleet standing on its stations
+        if policy.holding and self._unavailable():
+            return  # a UAV lost or gone its own way: the link policy's freeze takes over
+        if policy.holding:
+            if policy.back(t, states):
+                self._hold_ended(t, "resumed", now)
+            elif policy.overdue(t):
+                behind = policy.behind(t, states)
+                text = "; ".join(f"UAV {u}: {why}" for u, why in behind) or policy.current.text()
+                self.land_everyone(
+                    f"the formation held {t - policy.current.episode_since:.1f} s and the "
+                    f"error budget was not restored ({text})",
+                    now,
+                )
+            return
+        if self.frozen_by is not None:
+            return  # already frozen: the freeze's cause owns the formation
+        behind = policy.behind(t, states)
+        if not behind:
+            return
+        stop = t + self.window_s / 2  # the window's leading edge: no jump in the reference
+        self._hold_speed = float(self.profile.speeds[-1])  # every change announced so far
+        self.profile = self.profile.with_change(stop, 0.0)
+        hold = policy.start(t, stop, stop + self.window_s / 2, behind)
+        text = (
+            f"formation holds: {hold.text()}; every UAV stops on its target by "
+            f"t={hold.standing_s:.2f} s and waits until every UAV is back within "
+            f"{policy.resume_m:.2f} m"
+        )
+        self._event(MonitorEvent(t, "warning", "hold", text, hold.uavs[0]), now)
+
+    def _hold_ended(self, t: float, outcome: str, now: float) -> None:
+        """End the hold in progress: resumed (the speed it had, or a deferred one, from the
+        window's leading edge), or taken over by an operator's change or another freeze."""
+        hold = self.holds.end(t, outcome)
+        if hold is None:
+            return
+        if outcome == "resumed":
+            self.profile = self.profile.with_change(
+                max(t + self.window_s / 2, hold.stop_s), self._hold_speed
+            )
+            text = (
+                f"formation resumes at {self._hold_speed:g} m/s after holding "
+                f"{hold.duration_s:.1f} s: every UAV is back within {self.holds.resume_m:.2f} m"
+            )
+        else:
+            text = f"the hold ends after {hold.duration_s:.1f} s: {outcome}"
+        self._event(MonitorEvent(t, "info", "hold_end", text), now)
 
     def _unavailable(self) -> dict[int, str]:
         """The UAVs the formation cannot fly on without, index -> why: a lost link, or a
@@ -1892,6 +2012,7 @@ class GroundStation:
             telemetry_shed=sum(getattr(d.link.counters, "stale", 0) for d in self.drivers),
             limits_refused=list(self.limits_refused),
             stations=self._stations_result(),
+            holds=self.holds.all_holds(),
         )
 
 

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from gcs.drivers.base import Fleet
 from gcs.flight.core import GroundStation, RunResult
 from gcs.flight.forward import Forwarder
+from gcs.flight.lockstep import WorldSync
 from gcs.speed import OperatorSocket
 
 #: Longest wait for messages while connecting (wall s).
@@ -33,9 +34,11 @@ class LiveLoop:
         fleet: Fleet | None = None,
         operator: OperatorSocket | None = None,
         forwarder: Forwarder | None = None,
+        world: WorldSync | None = None,
         monotonic: Callable[[], float] = time.monotonic,
     ) -> None:
         self.station = station
+        self.world = world
         self.fleet = fleet
         self.operator = operator
         self.forwarder = forwarder
@@ -101,7 +104,11 @@ class LiveLoop:
                 continue
             self._poll_fleet(now)
             self._poll_operator(now)
+            self._sync_world(now)
             station.tick(now)
+            if self.world is not None and station.mission_time is not None:
+                self.world.ticked(station.mission_time)
+                self._sync_world(now)  # the followers may run on to the new tick
             self._update_view(now)
             self.tick_work.append(self._monotonic() - now)
             next_tick += period
@@ -110,8 +117,17 @@ class LiveLoop:
             if station.finished(now) or (until is not None and until(now)):
                 return
 
+    def _sync_world(self, now: float) -> None:
+        """Lockstep: publish the mission clock to the simulated world, held back for its
+        slowest process (`gcs.flight.lockstep`)."""
+        if self.world is None:
+            return
+        for text in self.world.step(now, self.station.clock):
+            self.station.note("warning", "world", text, now)
+
     def _receive(self, selector, timeout: float) -> None:
         ready = selector.select(timeout)
+        self._sync_world(self._monotonic())
         drivers = self.station.drivers
         tools = [key.data[1] for key, _ in ready if isinstance(key.data, tuple)]
         if tools:

@@ -146,6 +146,12 @@ class MetricsRecord(_Record):
     # since a relief: the UAVs out of the fleet (relieved and landed), left out of the checks;
     # while a relieved UAV flies above the chain the positions are (x, y, z), the checks 3-D
     out_of_fleet: list[int] | None = None
+    # while the formation holds for UAVs behind (gcs.flight.hold): the UAVs it holds for
+    holding: list[int] | None = None
+    # lockstep (gcs.flight.lockstep): mission seconds the clock was held back for the
+    # simulated world so far (log time = epoch + mission time lags the wall clock by this much
+    # over the speed-up)
+    world_held_s: float | None = None
 
 
 @_declare

@@ -198,6 +198,8 @@ SCHEMAS: dict[str, dict] = {
             "connected": {"type": ["boolean", "null"]},
             "positions": {"type": "array", "items": _VEC_OR_NULL},
             "out_of_fleet": {"type": "array", "items": _INT},
+            "holding": {"type": "array", "items": _INT},
+            "world_held_s": _NUM,
         },
         ["t"],
     ),

@@ -74,6 +74,13 @@ class Faults:
     gcs_stalls_before_tick: bool = False
     #: (UAV id, from, to): every packet to and from that UAV is lost (out of range, jammed)
     link_cuts: tuple[tuple[int, float, float], ...] = ()
+    #: (UAV id, from, to): what the ground station sends that UAV is lost, what it sends still
+    #: arrives (a UAV starved of setpoints: it stops following, its link stays alive)
+    setpoint_cuts: tuple[tuple[int, float, float], ...] = ()
+    #: (UAV id, from, to, seconds): what that UAV sends and receives from `from` to `to` is
+    #: that much later, in order (a late vehicle process); UAV id 0: every UAV (the radio
+    #: medium late)
+    late: tuple[tuple[int, float, float, float], ...] = ()
     #: (when, speed, effective time or None): `gcs speed` requests of the operator
     operator_requests: tuple[tuple[float, float, float | None], ...] = ()
     #: (when, effective time or None): `gcs return` requests of the operator
@@ -90,6 +97,13 @@ class Faults:
 
     def cut(self, uav: int, t: float) -> bool:
         return any(u == uav and start <= t < end for u, start, end in self.link_cuts)
+
+    def setpoints_cut(self, uav: int, t: float) -> bool:
+        return any(u == uav and start <= t < end for u, start, end in self.setpoint_cuts)
+
+    def lateness(self, uav: int, t: float) -> float:
+        """Seconds what UAV `uav` sends or receives at `t` is late (`late`)."""
+        return sum(s for u, start, end, s in self.late if u in (0, uav) and start <= t < end)
 
 
 @dataclass(frozen=True)
@@ -261,6 +275,7 @@ class _LockstepMission:
             keep_packets=True,
         )
         self.delay = DelayLine()
+        self._last_due: dict[tuple[int, str], float] = {}  # (UAV, direction): FIFO when late
         # each vehicle's own MAVLink identity, to frame what it sends as its radio would
         self.encoders = [
             mavlink.MAVLink(None, srcSystem=uav, srcComponent=1) for uav in range(1, size + 1)
@@ -422,22 +437,36 @@ class _LockstepMission:
         encoder.seq = (encoder.seq + 1) % 256
         _, delay = self.medium.route("uplink", index, sim_s)
         if delay is not None and not self._cut(index, sim_s):
-            self.delay.put((index, "up"), sim_s + delay, ("up", index, message, sim_s))
+            due = self._due(index, "up", sim_s, delay)
+            self.delay.put((index, "up"), due, ("up", index, message, sim_s))
 
     def _send_down(self, sim_s: float) -> None:
         """What the drivers sent, into the medium."""
         for index, link in enumerate(self.links):
             if not link.outbox:
                 continue
+            starved = self.options.faults.setpoints_cut(index + 1, sim_s - self.sim_zero)
             for message in link.outbox:
                 _, delay = self.medium.route("downlink", index, sim_s)
-                if delay is not None and not self._cut(index, sim_s):
-                    self.delay.put((index, "down"), sim_s + delay, ("down", index, message, sim_s))
+                if delay is not None and not self._cut(index, sim_s) and not starved:
+                    due = self._due(index, "down", sim_s, delay)
+                    self.delay.put((index, "down"), due, ("down", index, message, sim_s))
             link.outbox.clear()
 
     def _cut(self, index: int, sim_s: float) -> bool:
         faults = self.options.faults
         return bool(faults.link_cuts) and faults.cut(index + 1, sim_s - self.sim_zero)
+
+    def _due(self, index: int, direction: str, sim_s: float, delay: float) -> float:
+        """When a packet sent now arrives: the medium's delay, plus the lateness of a late
+        process or medium (`Faults.late`), never before the one sent before it."""
+        faults = self.options.faults
+        if not faults.late:
+            return sim_s + delay
+        due = sim_s + delay + faults.lateness(index + 1, sim_s - self.sim_zero)
+        due = max(due, self._last_due.get((index, direction), -math.inf))
+        self._last_due[(index, direction)] = due
+        return due
 
     # ------------------------------------------------------------------ speed-change timing
     def _on_received_by_uav(self, index: int, message, due_sim_s: float) -> None:

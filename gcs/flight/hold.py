@@ -1,0 +1,182 @@
+"""The hold policy: the formation stops before a UAV that fell behind breaks the error budget.
+
+A UAV following the formation is *behind* when (checked every tick, on mission time):
+
+* its tracking error |position - V_n(t)| reached `hold_threshold_m` = rho_c minus the
+  vehicle's tracking allowance: the share of the margin the smoothed reference may use is
+  spent, what is left is the allowance the UAV needs to stop within rho_c;
+* its latest position sample is more than `lag_s` mission seconds older than the mission
+  clock (its telemetry, or its process's clock, lags the mission: the ground station is
+  steering it blind).
+
+A setpoint timeout the UAV reports is not a cause of its own: measured in the fast mode (a UAV
+starved of setpoints for 1.5 s and 2 s at 8 m/s), holding on the report raised the worst
+tracking error from 1.49 m to 4.19 m and from 1.66 m to 6.23 m. The vehicle carries its last
+setpoint on for its timeout, then brakes more gently than the formation's reference stops, so
+it overshoots a formation that stopped; a formation that flies on is where it rejoins. A UAV
+that stays stopped shows as a growing tracking error, the first cause above.
+
+Then the formation *holds*: the speed profile drops to 0 at the earliest instant the smoothed
+reference can take it without a jump (t + w/2, the leading edge of the smoothing window), so every
+UAV decelerates within a_max and holds its current target; the mission clock runs on, the
+formation distance S stands still. It resumes (the speed it had, from t + w/2 again) once
+every following UAV is back within `resume_m` of its target (the tracking allowance), its
+telemetry current. A hold that has not restored the budget
+after `give_up_s` mission seconds (holds that follow each other within that time, stop and go,
+count as one) (the link-loss policy's `link_wait_s`) lands everyone where
+they are, as a lost link does. Scheduled and leader speed changes that fall due while holding
+become the speed the formation resumes with; an operator's change, or a freeze of another
+cause (link, take-off, Ctrl-C), takes the formation over from the hold.
+
+This module decides; `gcs.flight.core.GroundStation` reads its decisions each tick and applies
+them to the profile, the events, `/metrics` and the run JSON's `holds`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+#: Mission seconds a following UAV's latest sample may lag the mission clock (the vehicles'
+#: setpoint timeout: a UAV heard from less often is flying on its own).
+HOLD_LAG_S = 1.0
+
+
+@dataclass(frozen=True)
+class Hold:
+    """One hold of the formation, mission times: decided at `since`, the profile stopping at
+    `stop_s`, the reference standing still from `standing_s` (half a window later); part of
+    an episode of holds since `episode_since` (a hold that starts within `give_up_s` of the
+    end of the previous one continues its episode: stop and go counts as one hold). Ended at
+    `until` (None: still holding when the run ended) because of `outcome`: "resumed",
+    "landed", "operator" (an operator's speed change) or "superseded" (a freeze of another
+    cause took over). `reasons`: the UAVs (1-based) behind when it started, and why."""
+
+    since: float
+    stop_s: float
+    standing_s: float
+    reasons: tuple[tuple[int, str], ...]
+    episode_since: float
+    until: float | None = None
+    outcome: str | None = None
+
+    @property
+    def uavs(self) -> tuple[int, ...]:
+        return tuple(uav for uav, _ in self.reasons)
+
+    @property
+    def duration_s(self) -> float | None:
+        return None if self.until is None else self.until - self.since
+
+    def text(self) -> str:
+        return "; ".join(f"UAV {uav}: {why}" for uav, why in self.reasons)
+
+    def to_json(self) -> dict:
+        return {
+            "since_s": self.since,
+            "until_s": self.until,
+            "duration_s": self.duration_s,
+            "uavs": list(self.uavs),
+            "reason": self.text(),
+            "outcome": self.outcome,
+        }
+
+
+@dataclass(frozen=True)
+class UavState:
+    """What the policy reads of one UAV at a tick: its index (0-based), whether it follows the
+    formation now, its latest tracking error (NaN: none yet) and the mission time of its latest
+    sample (None: none)."""
+
+    index: int
+    following: bool
+    tracking_error_m: float
+    sample_time: float | None
+
+
+@dataclass
+class HoldPolicy:
+    """Decides when the formation holds and resumes (see the module docstring). Holds nothing
+    but its thresholds, the hold in progress and the finished ones."""
+
+    hold_threshold_m: float
+    resume_m: float
+    give_up_s: float
+    lag_s: float = HOLD_LAG_S
+    current: Hold | None = None
+    finished: list[Hold] = field(default_factory=list)
+
+    @classmethod
+    def for_budget(
+        cls, safety_margin: float, tracking_allowance: float, give_up_s: float
+    ) -> HoldPolicy:
+        """The thresholds from the error budget: hold at rho_c - allowance, resume within the
+        allowance (never above the hold threshold)."""
+        threshold = max(safety_margin - tracking_allowance, 0.5 * safety_margin)
+        return cls(threshold, min(tracking_allowance, threshold), give_up_s)
+
+    @property
+    def holding(self) -> bool:
+        return self.current is not None
+
+    def behind(self, t: float, uavs: list[UavState]) -> list[tuple[int, str]]:
+        """The following UAVs that fell behind at mission time `t`, (1-based UAV, why)."""
+        out = []
+        for uav in uavs:
+            if not uav.following:
+                continue
+            if uav.tracking_error_m >= self.hold_threshold_m:
+                why = (
+                    f"tracking error {uav.tracking_error_m:.2f} m >= "
+                    f"{self.hold_threshold_m:.2f} m (rho_c less the tracking allowance)"
+                )
+            elif uav.sample_time is not None and t - uav.sample_time > self.lag_s:
+                why = f"its telemetry lags mission time by {t - uav.sample_time:.1f} s"
+            else:
+                continue
+            out.append((uav.index + 1, why))
+        return out
+
+    def back(self, t: float, uavs: list[UavState]) -> bool:
+        """The reference stands still and every following UAV is back within `resume_m` of its
+        target, its telemetry current (a UAV that stopped following is judged where the
+        formation stopped, not while it slows down)."""
+        if self.current is not None and t < self.current.standing_s:
+            return False
+        return all(
+            not uav.following
+            or (
+                uav.tracking_error_m <= self.resume_m
+                and uav.sample_time is not None
+                and t - uav.sample_time <= self.lag_s
+            )
+            for uav in uavs
+        )
+
+    def start(
+        self, t: float, stop_s: float, standing_s: float, reasons: list[tuple[int, str]]
+    ) -> Hold:
+        episode = t
+        if self.finished:
+            last = self.finished[-1]
+            if t - last.until < self.give_up_s:
+                episode = last.episode_since
+        self.current = Hold(t, stop_s, standing_s, tuple(reasons), episode)
+        return self.current
+
+    def overdue(self, t: float) -> bool:
+        """The hold (its episode) has lasted `give_up_s` without restoring the budget."""
+        return self.current is not None and t - self.current.episode_since >= self.give_up_s
+
+    def end(self, t: float, outcome: str) -> Hold | None:
+        """End the hold in progress (if any) at `t`; returns it, finished."""
+        if self.current is None:
+            return None
+        hold = self.current
+        done = replace(hold, until=t, outcome=outcome)
+        self.finished.append(done)
+        self.current = None
+        return done
+
+    def all_holds(self) -> list[Hold]:
+        """Every hold of the run, the one in progress last (not ended)."""
+        return self.finished + ([self.current] if self.current is not None else [])

@@ -16,6 +16,26 @@ GCS_COMPONENT_ID = mavlink.MAV_COMP_ID_MISSIONPLANNER  # 190
 MISSION_TIME_NAME = b"MSN_TIME"
 _INT32 = (-(2**31), 2**31 - 1)
 
+#: STATUSTEXT of a simulated vehicle whose simulation could not keep up: its clock fell this
+#: many seconds behind (the ground station moves its clock mapping by as much).
+CLOCK_SLIPPED_TEXT = "Sim: clock slipped"
+
+
+def clock_slipped_text(seconds: float) -> str:
+    return f"{CLOCK_SLIPPED_TEXT} {seconds:.2f} s (CPU overload)"
+
+
+def parse_clock_slipped(text: str) -> float | None:
+    """The seconds a `clock_slipped_text` says, None for any other text."""
+    if not text.startswith(CLOCK_SLIPPED_TEXT + " "):
+        return None
+    try:
+        seconds = float(text[len(CLOCK_SLIPPED_TEXT) + 1 :].split(" ", 1)[0])
+    except ValueError:
+        return None
+    return seconds if math.isfinite(seconds) and seconds > 0 else None
+
+
 #: type_mask bits of SET_POSITION_TARGET_* (MAVLink POSITION_TARGET_TYPEMASK).
 IGNORE_ACCELERATION = (
     mavlink.POSITION_TARGET_TYPEMASK_AX_IGNORE

@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fleetwire.messages import clock_slipped_text, parse_clock_slipped
 from gcs.flight.clock import MissionClock, VehicleClock
 from gcs.monitors import NEAR_HYSTERESIS_M, LinkMonitor, SafetyMonitor
 from planner.obstacles import Obstacles
@@ -173,3 +174,25 @@ def test_a_sample_taken_while_the_mission_paused_maps_to_the_pause():
     assert mapped[-1] == pytest.approx(pause) and mapped[0] < pause - 0.8
     after = [clock.mission_time(v, offset + v - 1.5 + delay) for v in (12.6, 12.7, 15.0)]
     assert after == pytest.approx([pause + 0.1, pause + 0.2, pause + 2.5])
+
+
+def test_a_vehicle_clock_that_slipped_maps_its_samples_to_when_they_were_taken():
+    """The vehicles' simulator could not keep up and slipped 1.02 s: its clock fell that much
+    behind the mission clock, as it says (STATUSTEXT). Samples every 0.1 s, received 20 ms
+    after they were taken, keep mapping to when they were taken, not 1.02 s early for the
+    rest of the window (5 s of samples) as the minimum offset alone would."""
+    clock = VehicleClock()
+    offset, delay, slip = 100.0, 0.02, 1.02
+    for k in range(60):
+        clock.mission_time(0.1 * k, offset + 0.1 * k + delay)
+    text = clock_slipped_text(slip)
+    clock.slipped(parse_clock_slipped(text))
+    for k in range(60, 80):  # taken at mission time offset + 0.1 k + slip
+        taken = offset + 0.1 * k + slip
+        assert clock.mission_time(0.1 * k, taken + delay) == pytest.approx(taken + delay)
+
+
+def test_only_a_clock_slip_report_moves_the_vehicle_clock():
+    assert parse_clock_slipped(clock_slipped_text(0.25)) == pytest.approx(0.25)
+    for text in ("Sim: clock slipped nan s", "Sim: clock slipped -1 s", "Guided: no setpoint"):
+        assert parse_clock_slipped(text) is None

@@ -117,8 +117,14 @@ class VehicleClock:
 
     offset = min over recent samples of (mission time at receipt - vehicle time): the least
     delayed sample bounds the offset best. Both clocks run at the same speedup. A vehicle clock
-    that goes backwards (a reboot) starts the estimate over. After the mission clock was held
-    back (`pause`), a sample taken while the mission stood still maps to the instant it paused.
+    that goes backwards (a reboot) starts the estimate over. One that fell behind (a simulator
+    that could not keep up and says its clock slipped: `slipped`) moves every offset by the
+    slip: without it the minimum keeps the old offset and maps every sample the slip too early
+    for a whole window. After the mission clock was held back (`pause`), a sample taken while
+    the mission stood still maps to the instant it paused.
+
+    A vehicle whose telemetry is late and one whose clock fell behind look the same from here
+    (steadily larger offsets): only the vehicle can tell, so only its report moves the offsets.
     """
 
     def __init__(self, window: int = 50) -> None:
@@ -130,6 +136,10 @@ class VehicleClock:
         """The mission clock stood still at mission time `at` for `length` vehicle seconds."""
         self._offsets = deque((o - length for o in self._offsets), maxlen=self._offsets.maxlen)
         self._pause = (at, length)
+
+    def slipped(self, seconds: float) -> None:
+        """The vehicle's clock fell `seconds` behind the mission clock (its report)."""
+        self._offsets = deque((o + seconds for o in self._offsets), maxlen=self._offsets.maxlen)
 
     def mission_time(self, vehicle_s: float | None, received_s: float) -> float:
         if vehicle_s is None:

@@ -60,6 +60,7 @@ from typing import Protocol
 
 import numpy as np
 
+from fleetwire.messages import parse_clock_slipped
 from gcs.drivers.base import Driver, DriverEvent, Phase
 from gcs.drivers.limits import LimitExceeded, exceeded
 from gcs.flight.clock import MissionClock, VehicleClock, paused
@@ -1895,6 +1896,8 @@ class GroundStation:
 
     def _driver_event(self, driver: Driver, event: DriverEvent, now: float) -> None:
         level = _SEVERITY_LEVEL.get(event.severity, "info")
+        if event.kind == "statustext" and (slip := parse_clock_slipped(event.text)) is not None:
+            self._vehicle_clocks[driver.uav_id - 1].slipped(slip)
         self.recorder.event(
             level, f"UAV {driver.uav_id}: {event.text}", now, name=f"uav{driver.uav_id}"
         )

@@ -19,6 +19,7 @@ from collections.abc import Callable
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.messages import clock_slipped_text
 from vehicles import telemetry
 from vehicles.autopilot import (
     auto,
@@ -274,9 +275,7 @@ class Autopilot:
 
     def clock_slipped(self, seconds: float, stamp: Stamp) -> None:
         """The simulation could not keep up and its clock slipped (the sim rate-limits this)."""
-        self.status_text(
-            mavlink.MAV_SEVERITY_WARNING, f"Sim: clock slipped {seconds:.2f} s (CPU overload)"
-        )
+        self.status_text(mavlink.MAV_SEVERITY_WARNING, clock_slipped_text(seconds))
 
     # ------------------------------------------------------------------ input ----------
     def handle(self, message: mavlink.MAVLink_message, stamp: Stamp) -> None:

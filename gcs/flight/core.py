@@ -1262,30 +1262,20 @@ class GroundStation:
     def _deferred(self, speed: float, t: float, source: str, now: float) -> bool:
         """While the formation is frozen, a scheduled or leader change is not flown: it becomes
         the speed the formation resumes with (only the operator unfreezes it). While every UAV
-        holds its station, it becomes the speed of the way home."""
+        holds its station, it becomes the speed of the way home. While the formation holds
+        for a UAV behind, it becomes the speed the hold resumes with."""
         if self._holding():
             self._hold = (self._hold[0], speed)
-            text = (
-                f"{source}: {speed:g} m/s deferred, every UAV holds its station; the fleet "
-                "flies home at that speed"
-            )
-            self._event(MonitorEvent(t, "warning", "speed_deferred", text), now)
-            return True
-        if self.holds.holding:
+            why = "every UAV holds its station; the fleet flies home at that speed"
+        elif self.holds.holding:
             self._hold_speed = speed
-            text = (
-                f"{source}: {speed:g} m/s deferred, the formation holds for a UAV behind; "
-                "it resumes at that speed"
-            )
-            self._event(MonitorEvent(t, "warning", "speed_deferred", text), now)
-            return True
-        if self.frozen_by is None:
+            why = "the formation holds for a UAV behind; it resumes at that speed"
+        elif self.frozen_by is not None:
+            self._resume_speed = speed
+            why = f"the formation is frozen ({self.frozen_by}); it resumes at that speed"
+        else:
             return False
-        self._resume_speed = speed
-        text = (
-            f"{source}: {speed:g} m/s deferred, the formation is frozen ({self.frozen_by}); "
-            "it resumes at that speed"
-        )
+        text = f"{source}: {speed:g} m/s deferred, {why}"
         self._event(MonitorEvent(t, "warning", "speed_deferred", text), now)
         return True
 

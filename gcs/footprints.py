@@ -39,7 +39,9 @@ import gc
 import json
 import logging
 import math
+import os
 import re
+import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -50,6 +52,7 @@ from typing import Any
 import numpy as np
 import shapely
 
+from fleetwire.files import FOOTPRINT_BYTES, FileRefused, read_text_bounded
 from gcs.geodesy import Origin, lonlat_to_local
 from planner.formation import DISTANCE_TOLERANCE
 
@@ -280,6 +283,12 @@ def read_footprints(
     """
     name = options.file
     kind = file_format(name)
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        mode = stat.S_IFREG  # missing or unreadable: each reader says so in its own words
+    if not stat.S_ISREG(mode):  # a device is read forever, a FIFO blocks: neither is opened
+        raise FootprintError(f"a footprint file: {name} is not a regular file")
     col = _Collector(name, options, height_limit)
     with _gc_paused():
         if kind == "osm":
@@ -678,7 +687,9 @@ _FOOTPRINT_TYPES = ("Polygon", "MultiPolygon", "LineString", "MultiLineString")
 def _read_geojson(path: Path, col: _Collector) -> None:
     name = col.name
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        doc = json.loads(read_text_bounded(path, FOOTPRINT_BYTES))
+    except FileRefused as exc:
+        raise FootprintError(f"a GeoJSON file: {name}: {exc}") from None
     except (OSError, UnicodeDecodeError) as exc:
         reason = getattr(exc, "strerror", None) or type(exc).__name__
         raise FootprintError(f"a readable GeoJSON file: {name} ({reason})") from None

@@ -273,6 +273,24 @@ class MemoryLink(_Liveness):
 _NETWORK_URL = re.compile(r"^(udpout|udpin|udpbcast|udp|tcpin|tcp):(.+):(\d+)$")
 
 
+def _pin_to_peer(connection) -> None:
+    """A `udpout:` link hears only its peer: its socket is bound to the loopback when the peer
+    is on this machine (else to the address the route to the peer leaves from, never every
+    interface) and connected to the peer, so the kernel drops datagrams from anyone else (a
+    forged LAND on the machine's network address never reaches the ground station)."""
+    if not isinstance(connection, mavutil.mavudp) or connection.udp_server:
+        return
+    if connection.broadcast:
+        return  # udpbcast: it learns its peer from the first answer
+    host, port = connection.destination_addr
+    address = socket.gethostbyname(host)
+    if address.startswith("127."):
+        connection.port.bind(("127.0.0.1", 0))
+    connection.port.connect((address, port))
+    connection.destination_addr = (address, port)
+    connection.resolved_destination_addr = address
+
+
 def open_connection(url: str, source_system: int, source_component: int = 0):
     """pymavlink's connection for the connection string `url`, or `OSError` with the reason.
 
@@ -290,9 +308,11 @@ def open_connection(url: str, source_system: int, source_component: int = 0):
             raise OSError(f"host {host}: {error}") from None
     for attempt in range(1, CONNECT_ATTEMPTS + 1):
         try:
-            return mavutil.mavlink_connection(
+            connection = mavutil.mavlink_connection(
                 url, source_system=source_system, source_component=source_component, retries=0
             )
+            _pin_to_peer(connection)
+            return connection
         except ConnectionRefusedError as error:
             if attempt == CONNECT_ATTEMPTS:
                 raise

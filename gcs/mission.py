@@ -69,6 +69,7 @@ import numpy as np
 import shapely
 import yaml
 
+from fleetwire.files import MISSION_BYTES, FileRefused, check_nesting, read_bounded
 from gcs.errors import InputError, join_key
 from gcs.footprints import (
     MAX_FOOTPRINT_DISTANCE_M,  # also re-exported
@@ -97,6 +98,16 @@ PARKING = ("segment", "ray")
 #: `stations.order`: `tsp` (the planner picks the shortest tour) or `given` (as written).
 STATION_ORDERS = ("tsp", "given")
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")
+
+
+#: Largest magnitude of a length in metres (coordinates, margins, ranges): 1,000 km, well past
+#: any local frame a fleet flies in; beyond it floats lose the centimetre.
+MAX_METRES = 1e6
+#: UAVs one ground station can fly: MAVLink system ids 1-254 (255 is the ground station's,
+#: `fleetwire.messages.GCS_SYSTEM_ID`; fleetwire is not imported here: planning stays light).
+MAX_FLEET_SIZE = 254
+#: Largest `sim.seed`: the vehicles' and the medium's seeds are 63-bit.
+MAX_SEED = 2**63 - 1
 
 
 @dataclass(frozen=True)
@@ -327,15 +338,17 @@ def read_yaml(path: Path, what: str) -> tuple[str, Any]:
     """The text of the YAML file `path` (`what` it should be, for a directory's refusal) and
     its data, duplicate keys refused; `InputError` naming the file on anything unreadable."""
     try:
-        text = path.read_text(encoding="utf-8")
-    except IsADirectoryError:
-        raise InputError(path, "", f"{what}, got a directory") from None
+        text = read_bounded(path, MISSION_BYTES).decode("utf-8")
+    except FileRefused as exc:
+        raise InputError(path, "", f"{what}: {exc}") from None
     except UnicodeDecodeError:
         raise InputError(path, "", "a UTF-8 YAML text file") from None
     except OSError as exc:
         raise InputError(path, "", f"a readable file ({exc.strerror or exc})") from None
     try:
         data = parse_yaml(text)
+    except FileRefused as exc:
+        raise InputError(path, "", f"YAML {exc}") from None
     except _DuplicateKey as exc:
         raise InputError(path, exc.key, f"each key once (duplicate at line {exc.line})") from None
     except yaml.YAMLError as exc:
@@ -348,7 +361,9 @@ def read_yaml(path: Path, what: str) -> tuple[str, Any]:
 
 def parse_yaml(text: str) -> Any:
     """YAML text as data, the way mission files are read: safe, duplicate keys refused
-    (`_DuplicateKey`), YAML 1.2 floats such as 1e3."""
+    (`_DuplicateKey`), YAML 1.2 floats such as 1e3, nesting bounded (`FileRefused`: libyaml
+    crashes the process on text nested tens of thousands of levels deep)."""
+    check_nesting(text, yaml=True)
     return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
 
 
@@ -498,6 +513,8 @@ class MissionParser:
         if not _is_number(value) or not math.isfinite(value):
             raise self.fail(path, f"{want()}, got {describe_value(value)}")
         value = float(value)
+        if unit == "m" and abs(value) > MAX_METRES:  # a local frame, a radio, a building
+            raise self.fail(path, f"at most {MAX_METRES:,.0f} m in magnitude, got {value:g}")
         if low is not None and (value < low or (low_open and value <= low)):
             raise self.fail(path, f"{want(value)}, got {_fmt(value, low)}")
         if high is not None and (value > high or (high_open and value >= high)):
@@ -880,6 +897,12 @@ class MissionParser:
                 raise self.fail(
                     "fleet.size", f"auto or an integer >= 1, got {describe_value(size_value)}"
                 )
+            if size_value > MAX_FLEET_SIZE:
+                raise self.fail(
+                    "fleet.size",
+                    f"at most {MAX_FLEET_SIZE} UAVs (MAVLink system ids 1-{MAX_FLEET_SIZE}), "
+                    f"got {size_value}",
+                )
             size = size_value
         backend = self.choice(m.get("backend", "sim"), "fleet.backend", BACKENDS)
         items = self.sequence(m.get("connections", []), "fleet.connections", "connection strings")
@@ -912,6 +935,8 @@ class MissionParser:
             m.get("setpoint_rate_hz", d.setpoint_rate_hz), "sim.setpoint_rate_hz", "Hz"
         )
         seed = self.integer(m.get("seed", d.seed), "sim.seed", low=0)
+        if seed > MAX_SEED:
+            raise self.fail("sim.seed", f"an integer in [0, {MAX_SEED}], got {seed}")
         keys = ("wind_mean_mps", "wind_direction_deg", "wind_gust_mps", "wind_time_s", "position_m")
         n = self.mapping(m.get("noise", {}), "sim.noise", keys)
         dn = SimNoise()

@@ -38,6 +38,8 @@ from typing import Any
 
 import numpy as np
 
+from fleetwire.files import CALIBRATION_BYTES, FileRefused, read_text_bounded
+
 #: The table `gcs eval calibrate` ships (its default output).
 DEFAULT_CALIBRATION = Path(__file__).resolve().parent / "calibration_ns3.json"
 #: The `format` key of a calibration table, and the versions this module reads.
@@ -227,7 +229,11 @@ def load_calibration(path: str | Path = DEFAULT_CALIBRATION) -> CalibrationTable
     bad file raises ValueError naming the file and the key."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_text_bounded(path, CALIBRATION_BYTES)
+    except FileRefused as error:
+        raise ValueError(f"{path}: expected a calibration file: {error}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: expected a UTF-8 JSON calibration file") from None
     except OSError as error:
         raise ValueError(
             f"{path}: expected a readable calibration file ({error.strerror})"

@@ -14,6 +14,7 @@ import pytest
 
 from gcs.drivers.base import Phase
 from gcs.geodesy import Origin
+from gcs.link import mavutil
 from tests.fakes.ardupilot import GUIDED, LAND, ArduCopterModel
 from tests.fakes.flight import Flight, SinkDriver, home_of, hover, leg
 from tests.fakes.replay import drive, load, reencode
@@ -22,6 +23,7 @@ from tests.flying import flight_speedup
 # Every test here starts a process or flies over UDP.
 pytestmark = pytest.mark.slow
 
+mavlink = mavutil.mavlink
 SPEEDUP = flight_speedup(40.0)  # the boot's ~42 s take ~1 s (lower on a busy machine)
 ORIGIN = Origin(-35.3632, 149.1652, 584.0)
 SLOT = (25.0, -40.0)
@@ -266,3 +268,29 @@ def test_recorded_ardupilot_battery_is_the_telemetry_s_remaining_charge():
         unknown = replace(statuses[-1], fields={**statuses[-1].fields, "battery_remaining": -1})
         bench.driver.on_message(reencode(unknown), unknown.t)
         assert telemetry.battery_remaining_pct is None
+
+
+def test_a_landing_reported_once_is_commanded_until_the_heartbeats_show_it():
+    """The vehicle reports LAND by itself (a failsafe, or a report that was not true), then
+    GUIDED again: the driver asks for LAND again at once, until the heartbeats show it; and
+    the ground station's own LAND for a UAV already "landing" is sent too."""
+    model = copter()
+    with start(model) as flight:
+        take_off(flight)
+        with flight.fake.lock:
+            model.change_mode_by_itself(LAND, flight.fake.now())
+        assert flight.run_until(lambda: flight.driver.phase == Phase.LANDING, 3.0)
+        asked = len(commands(flight, mavlink.MAV_CMD_DO_SET_MODE))
+        with flight.fake.lock:
+            model.change_mode_by_itself(GUIDED, flight.fake.now())  # it was not landing
+        assert flight.run_until(lambda: model.mode == LAND, 5.0), model.mode
+        modes = [e.message.param2 for e in commands(flight, mavlink.MAV_CMD_DO_SET_MODE)]
+        assert LAND in modes[asked:]
+        left = "the vehicle left LAND: mode GUIDED; asking for LAND again"
+        assert left in flight.texts("failsafe")
+        # the ground station lands everyone: a UAV landing by itself is asked all the same
+        asked = len(commands(flight, mavlink.MAV_CMD_DO_SET_MODE))
+        flight.driver.land(time.monotonic())
+        assert flight.run_until(
+            lambda: len(commands(flight, mavlink.MAV_CMD_DO_SET_MODE)) > asked, 3.0
+        )

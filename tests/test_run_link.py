@@ -79,3 +79,27 @@ def test_liveness_counts_only_the_expected_system_and_survives_garbage():
     finally:
         link.close()
         vehicle.close()
+
+
+def test_a_udpout_link_hears_only_its_peer_on_the_loopback():
+    """Bound to 127.0.0.1 (not every interface) and connected to its UAV: a datagram from any
+    other port is dropped by the kernel, even a valid message of the UAV's system id (a forged
+    LAND heartbeat), while the UAV's own are received."""
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    vehicle.bind(("127.0.0.1", 0))
+    intruder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    intruder.bind(("127.0.0.1", 0))
+    link = Link(f"udpout:127.0.0.1:{vehicle.getsockname()[1]}", system_id=1)
+    try:
+        link.send(link.mav.heartbeat_encode(6, 8, 0, 0, 4), time.monotonic())
+        _, gcs_address = vehicle.recvfrom(2048)
+        assert gcs_address[0] == "127.0.0.1"
+        for _ in range(20):
+            intruder.sendto(vehicle_message(1), gcs_address)
+        vehicle.sendto(vehicle_message(1), gcs_address)  # the last one sent
+        got = drain(link, lambda got: got)
+        assert len(got) == 1 and link.counters.received == 1  # only the UAV's
+    finally:
+        link.close()
+        vehicle.close()
+        intruder.close()

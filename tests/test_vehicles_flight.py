@@ -3,6 +3,9 @@
 
 from __future__ import annotations
 
+import os
+import signal
+
 import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -248,3 +251,30 @@ def test_in_flight_refusals_and_local_ned_setpoints(vehicle: GroundStation):
     ack = gcs.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196)  # forced disarm is obeyed
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED
     gcs.wait_for(lambda: gcs.relative_altitude() < 0.2, 20.0, "the fall after a forced disarm")
+
+
+def test_stopping_the_process_lands_a_flying_vehicle_first():
+    """SIGTERM while the vehicle flies (a ground station shutting down, a fleet closed on an
+    error): it is not dropped from the sky; it lands (LAND), disarms, and only then does the
+    process exit by itself (status 0)."""
+    with VehicleProcess(count=1, speedup=SPEEDUP, args=["--seed", "3"]) as process:
+        gcs = GroundStation(process.port(), speedup=SPEEDUP)
+        try:
+            gcs.connect()
+            gcs.take_off(6.0)
+            texts = len(gcs.texts)
+            os.kill(process.pid(), signal.SIGTERM)
+            gcs.wait_for(
+                lambda: gcs.text_matching("Sim: stopping: landing first", texts),
+                10.0,
+                "the landing text",
+            )
+            gcs.wait_for(lambda: gcs.heartbeat_is(custom_mode=LAND), 5.0, "LAND in the heartbeat")
+            code = process.process.wait(timeout=60)  # exits by itself once disarmed
+            gcs.wait_for(
+                lambda: gcs.text_matching("Disarming motors", texts), 5.0, "the disarm text"
+            )  # sent before the process exits: it was on the ground, disarmed
+            assert gcs.relative_altitude() < 4.0 * Disturbances().navigation_sigma_vertical_m
+        finally:
+            gcs.close()
+        assert code == 0

@@ -1,7 +1,9 @@
 """Command line of the simulated vehicles: ``vehicles sim --count N --base-port P ...``.
 
 Bad input (a flag, a value, a port in use) is one line on stderr and exit status 2.
-SIGINT and SIGTERM stop the simulation cleanly (exit 0).
+SIGINT and SIGTERM stop the simulation cleanly (exit 0): with a vehicle in the air, the first
+one makes every flying vehicle LAND and the process exits once all are disarmed (a stop never
+drops a UAV from the sky); a second one stops at once.
 """
 
 from __future__ import annotations
@@ -535,11 +537,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    stop = False
+    stops = 0  # SIGINT/SIGTERM received: the first lands what flies, the second stops now
 
     def request_stop(signum: int, frame: object) -> None:
-        nonlocal stop
-        stop = True
+        nonlocal stops
+        stops += 1
 
     signal.signal(signal.SIGINT, request_stop)
     signal.signal(signal.SIGTERM, request_stop)
@@ -556,7 +558,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             orphan = OrphanExit(simulation.autopilots, args.exit_when_orphaned or None)
 
         def should_stop() -> bool:
-            done = stop or (orphan is not None and orphan())
+            asked = stops >= 2 or (stops == 1 and simulation.land_before_stopping())
+            done = asked or (orphan is not None and orphan())
             if orphan is not None and orphan.orphaned:
                 simulation.leave_world()  # no ground station to wait for: failsafes on
             return done

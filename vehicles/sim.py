@@ -157,6 +157,18 @@ class Simulation:
         if hasattr(self, "clock"):
             self.clock.leave(time.monotonic())
 
+    def land_before_stopping(self) -> bool:
+        """Asked to stop: every vehicle still in the air lands first (on the wall clock: the
+        ground station that held the world may be gone). True once none is armed any more:
+        the process may stop then."""
+        if not any(autopilot.armed for autopilot in self.autopilots):
+            return True
+        self.leave_world()
+        stamp = Stamp(self.sim_time(), time.monotonic())
+        for autopilot in self.autopilots:
+            autopilot.land_before_stopping(stamp)
+        return False
+
     def leave_world(self) -> None:
         """Run on the wall clock from now on (the ground station is gone)."""
         if self.clock.world is not None:

@@ -87,6 +87,18 @@ def paper_command(args: argparse.Namespace) -> int:
     if not speeds and not leaders:
         raise InputError(None, "--speeds", "at least one speed or leader to fly")
     mission = load_mission(args.mission)  # bad file: exit 2 before anything flies
+    if leaders:
+        from gcs.planning import plan_mission
+
+        planned = plan_mission(mission)
+        size = planned.formation.fleet_size if planned.valid else None
+        beyond = [n for n in leaders if size is not None and n > size]
+        if beyond:
+            raise InputError(
+                None,
+                "--leaders",
+                f"UAV numbers in 1..{size} (the mission's fleet), got {beyond[0]}",
+            )
     options = ns3_options(args) if args.network == "ns3" else None
     if options is not None:
         if not ns3_loaded():  # before anything flies: a missing extra is one line, exit 2

@@ -19,7 +19,7 @@ from rich.table import Table
 
 from gcs.cli.outputs import output_path, write_output
 from gcs.errors import InputError, RowsRefused
-from gcs.mission import Mission, load_mission
+from gcs.mission import MAX_FLEET_SIZE, Mission, load_mission
 from gcs.planning import MissionPlan, mission_problem, plan_json, plan_mission
 from planner.numbers import fmt_against, plural
 from planner.search import SearchProgress
@@ -186,6 +186,14 @@ def plan_with_args(mission: Mission, args: argparse.Namespace) -> MissionPlan:
     finally:
         if status is not None:
             status.stop()
+    size = plan.formation.fleet_size if plan.valid and plan.formation is not None else 0
+    if size > MAX_FLEET_SIZE:  # refused by `check` and `plan` too, not at take-off
+        raise InputError(
+            mission.source,
+            "fleet.size",
+            f"at most {MAX_FLEET_SIZE} UAVs (MAVLink system ids 1-{MAX_FLEET_SIZE}), "
+            f"the plan needs {size}",
+        )
     getattr(args, "release_warnings", lambda: None)()  # the input is accepted
     return plan
 

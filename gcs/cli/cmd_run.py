@@ -38,6 +38,8 @@ if TYPE_CHECKING:
 MAX_SETPOINT_RATE_HZ = 50.0
 #: Highest --speedup accepted.
 MAX_SPEEDUP = 100.0
+#: Longest --takeoff-lead (mission s): a take-off an hour before departure is no lead.
+MAX_TAKEOFF_LEAD_S = 3600.0
 
 
 def register(mission_commands: argparse._SubParsersAction) -> None:
@@ -169,10 +171,12 @@ def check_arguments(args: argparse.Namespace) -> None:
     if not (math.isfinite(args.link_wait) and args.link_wait >= 0):
         raise InputError(None, "--link-wait", f"a number of seconds >= 0, got {args.link_wait:g}")
     if args.takeoff_lead is not None and not (
-        math.isfinite(args.takeoff_lead) and args.takeoff_lead > 0
+        math.isfinite(args.takeoff_lead) and 0 < args.takeoff_lead <= MAX_TAKEOFF_LEAD_S
     ):
         raise InputError(
-            None, "--takeoff-lead", f"a number of seconds > 0, got {args.takeoff_lead:g}"
+            None,
+            "--takeoff-lead",
+            f"a number of seconds in (0, {MAX_TAKEOFF_LEAD_S:g}], got {args.takeoff_lead:g}",
         )
     if args.vehicles_per_process is not None and args.vehicles_per_process < 1:
         raise InputError(None, "--vehicles-per-process", "an integer >= 1")
@@ -338,6 +342,10 @@ def run_command(args: argparse.Namespace) -> int:
             )
 
         run = GroundStation(plan, drivers, clock, recorder, options, view=view, replan=replan)
+        # a full disk or an I/O error stops the file, never the flight: an event of the run
+        recorder.on_error = lambda text: run.note("error", "recording", text, time.monotonic())
+        if recorder.error is not None:  # it failed already, describing the mission
+            recorder.on_error(recorder.error)
         world = None
         if isinstance(fleet, SimFleet) and fleet.world is not None:
             from gcs.flight.lockstep import WorldSync
@@ -363,6 +371,7 @@ def run_command(args: argparse.Namespace) -> int:
         data = run_json(result, str(log_path), mission.safety_margin)
         data["signing"] = signing.summary()
         data["lockstep"] = world.summary() if world is not None else {"enabled": False}
+        data["recording"] = {"ok": recorder.error is None, "error": recorder.error}
         recorder.outcome(data)
         if result.limits_refused:  # before take-off: the mission, not the flight, was wrong
             refused = result.limits_refused[0]
@@ -371,6 +380,9 @@ def run_command(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(data, allow_nan=False))
     console.print(summary_renderable(result, str(log_path), mission.safety_margin))
+    if recorder.error is not None:
+        console.print(f"[bold red]the recording is incomplete: {recorder.error}[/]")
+        return max(exit_status(result), EXIT_ABORTED)
     return exit_status(result)
 
 

@@ -478,7 +478,21 @@ class Driver(ABC):
         Leaving guided flight without being asked (no mode goal) while the GCS expects it is a
         failsafe of the vehicle's own (a GCS, offboard-loss or battery failsafe): a `failsafe`
         event and the phase of the vehicle's new mode (`vehicle_mode_phase`), so that the
-        ground station sees it at once."""
+        ground station sees it at once.
+
+        A UAV landing that leaves LAND without being asked (a report of LAND that its next
+        heartbeats contradict, a pilot's switch) is asked for LAND again: the ground station
+        wanted it down, and a vehicle in GUIDED without setpoints would only hover."""
+        if (
+            self.phase == Phase.LANDING
+            and previous == FlightMode.LAND
+            and self.current_mode() != FlightMode.LAND
+            and self.mode_goal is None
+        ):
+            what = f"the vehicle left LAND: mode {self.describe_mode()}; asking for LAND again"
+            self.emit("failsafe", what, now, mavlink.MAV_SEVERITY_WARNING)
+            self.request_mode(FlightMode.LAND, now)
+            return
         if previous != FlightMode.GUIDED or self.phase not in GUIDED_PHASES:
             return
         if self.mode_goal is not None:
@@ -619,8 +633,14 @@ class Driver(ABC):
             self._begin_arming(now)
 
     def land(self, now: float) -> None:
-        """Land where the UAV is (the runtime brings it over its arrival slot first)."""
-        if self.phase in (Phase.LANDING, Phase.LANDED, Phase.FAILED):
+        """Land where the UAV is (the runtime brings it over its arrival slot first). A UAV
+        already landing by itself (its own failsafe, as it reported) is asked all the same,
+        until its heartbeats show LAND: one report is no landing confirmed."""
+        if self.phase in (Phase.LANDED, Phase.FAILED):
+            return
+        if self.phase == Phase.LANDING:
+            if self.mode_goal is None:
+                self.request_mode(FlightMode.LAND, now)
             return
         self._takeoff_altitude = None
         if not self.telemetry.armed and self.phase not in AIRBORNE_PHASES:

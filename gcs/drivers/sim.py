@@ -42,6 +42,8 @@ COPTER_MODES = {
     FlightMode.LAND: COPTER_MODE["LAND"],
 }
 _MODE_OF_NUMBER = {number: mode for mode, number in COPTER_MODES.items()}
+#: Wall seconds a vehicle process may take to land its UAVs and exit when the fleet is closed.
+LANDING_GRACE_S = 60.0
 
 
 class SimDriver(Driver):
@@ -278,7 +280,10 @@ class SimFleet(Fleet):
         return problems
 
     def close(self) -> None:
-        """SIGTERM every process, then SIGKILL what is still alive after a grace period."""
+        """SIGTERM every process, then SIGKILL what is still alive after a grace period. A
+        vehicle process asked to stop while one of its UAVs flies lands it first (`vehicles
+        sim`: the first SIGTERM lands, the process exits once every vehicle is disarmed): the
+        grace period is long enough for a landing."""
         if self.medium is not None:
             self.medium.close()
         for process in self.processes:
@@ -286,7 +291,7 @@ class SimFleet(Fleet):
                 process.send_signal(signal.SIGTERM)
         for process in self.processes:
             try:
-                process.wait(timeout=3.0)
+                process.wait(timeout=LANDING_GRACE_S)
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait(timeout=3.0)

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import base64
 import json
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -66,6 +67,8 @@ from gcs.flight.records import (
 )
 from gcs.logs import scene
 from gcs.logs.foxglove_front import FoxgloveFront
+
+log = logging.getLogger(__name__)
 
 #: Recording profile written in the MCAP header.
 PROFILE = "fleetline"
@@ -335,6 +338,35 @@ class FlightRecorder:
         self._clock_noted = False
         self.messages = 0
         self.closed = False
+        #: why the file stopped being written (a full disk, an I/O error), None while it is
+        self.error: str | None = None
+        #: told once, with `error`, when writing fails (the run's events)
+        self.on_error: Callable[[str], None] | None = None
+
+    def _safely(self, action: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        """`action(...)`, unless writing the file failed already; a failure (a full disk, an
+        I/O error: foxglove-sdk raises RuntimeError, Python OSError) stops the file where it
+        is, never the flight: the recording is what it wrote so far (readable up to its last
+        chunk, like a cut one), the live server goes on."""
+        if self.error is not None and self._server is None:
+            return None
+        try:
+            return action(*args, **kwargs)
+        except (RuntimeError, OSError) as error:
+            self._failed(error)
+            return None
+
+    def _failed(self, error: BaseException) -> None:
+        if self.error is not None:
+            return
+        self.error = f"writing {self.path} failed: {error}"
+        log.error("%s: the recording stops here, the flight goes on", self.error)
+        try:
+            self._writer.close()
+        except (RuntimeError, OSError):
+            pass  # the file is cut where it was cut
+        if self.on_error is not None:
+            self.on_error(self.error)
 
     @property
     def server_port(self) -> int | None:
@@ -373,7 +405,7 @@ class FlightRecorder:
             return
         if self._pending or not self._clock_noted:
             self._drain_pending()
-        emit(self.clock.log_time_ns(wall))
+        self._safely(emit, self.clock.log_time_ns(wall))
         self.messages += 1
         if wall - self._last_flush >= FLUSH_PERIOD_S:
             self.flush(wall)
@@ -381,14 +413,15 @@ class FlightRecorder:
     def flush(self, wall: float | None = None) -> None:
         """Close the current chunk and write it to the file now."""
         self._last_flush = time.monotonic() if wall is None else wall
-        self._writer.flush()
+        if self.error is None:
+            self._safely(self._writer.flush)
 
     def _drain_pending(self) -> None:
         if not self._clock_noted:
             self._clock_noted = True
             epoch = getattr(self.clock, "epoch_ns", None)
             speedup = getattr(self.clock, "speedup", None)
-            self._writer.write_metadata(
+            self.metadata(
                 "clock",
                 {
                     "epoch_ns": str(epoch),
@@ -398,7 +431,7 @@ class FlightRecorder:
             )
         pending, self._pending = self._pending, []
         for emit, wall in pending:
-            emit(self.clock.log_time_ns(wall))
+            self._safely(emit, self.clock.log_time_ns(wall))
             self.messages += 1
 
     def _t(self, wall: float) -> float | None:
@@ -608,13 +641,20 @@ class FlightRecorder:
     def attach(self, name: str, media_type: str, data: bytes) -> None:
         """An MCAP attachment (mission file, plan JSON...)."""
         now = self._unix_now()
-        self._writer.attach(
-            log_time=now, create_time=now, name=name, media_type=media_type, data=data
-        )
+        if self.error is None:
+            self._safely(
+                self._writer.attach,
+                log_time=now,
+                create_time=now,
+                name=name,
+                media_type=media_type,
+                data=data,
+            )
 
     def metadata(self, name: str, values: dict[str, str]) -> None:
         """An MCAP metadata record."""
-        self._writer.write_metadata(name, values)
+        if self.error is None:
+            self._safely(self._writer.write_metadata, name, values)
 
     def close(self) -> None:
         """Write what is still pending (with the wall clock if never anchored) and finish."""
@@ -624,13 +664,14 @@ class FlightRecorder:
             # never anchored (the fleet never connected): keep the records on the Unix clock
             offset = self._unix_now() - int(time.monotonic() * 1e9)
             for emit, wall in self._pending:
-                emit(offset + int(wall * 1e9))
+                self._safely(emit, offset + int(wall * 1e9))
             self._pending = []
         elif self._pending:
             self._drain_pending()
         self.closed = True
         self._stop_serving()
-        self._writer.close()
+        if self.error is None:
+            self._safely(self._writer.close)
 
     def _stop_serving(self) -> None:
         if self._front is not None:

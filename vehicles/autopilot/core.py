@@ -273,6 +273,13 @@ class Autopilot:
         if self.leader.active():
             speed.update_leader(self, stamp)
 
+    def land_before_stopping(self, stamp: Stamp) -> None:
+        """The process is asked to stop while this vehicle flies: land first (LAND, as the GCS
+        failsafe would), so that stopping the process never drops a UAV from the sky."""
+        if self.airborne() and self.mode != Mode.LAND:
+            modes.set_mode(self, Mode.LAND, stamp)
+            self.status_text(mavlink.MAV_SEVERITY_CRITICAL, "Sim: stopping: landing first")
+
     def clock_slipped(self, seconds: float, stamp: Stamp) -> None:
         """The simulation could not keep up and its clock slipped (the sim rate-limits this)."""
         self.status_text(mavlink.MAV_SEVERITY_WARNING, clock_slipped_text(seconds))

@@ -21,6 +21,8 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from mcap.records import DataEnd
+from mcap.stream_reader import StreamReader
 
 import gcs.cli
 import vehicles.cli
@@ -398,3 +400,31 @@ def test_a_recording_cut_anywhere_is_read_up_to_the_cut(recording, tmp_path_fact
     whole = read_recording(recording).topics["/mavlink/1/rx"]
     times = kept.times if kept else []
     assert times == whole.times[: len(times)]
+
+
+def _data_end(path) -> int:
+    """Where the data section of an MCAP file ends (its DataEnd record starts)."""
+    with open(path, "rb") as handle:
+        for record in StreamReader(handle).records:
+            if isinstance(record, DataEnd):
+                return handle.tell() - 13  # DataEnd: opcode, length, crc
+    raise AssertionError("no DataEnd")
+
+
+@settings(max_examples=40, derandomize=True, deadline=None)
+@given(fraction=st.floats(0.0, 0.999))
+def test_a_byte_flipped_anywhere_in_the_data_is_never_read_silently(
+    recording, tmp_path_factory, fraction
+):
+    """A flipped byte (a bad sector, a bad copy) anywhere in the data section: `gcs log info`
+    says the file is damaged or cut, never reads it as whole (CRCs checked)."""
+    data = bytearray(recording.read_bytes())
+    at = 8 + int((_data_end(recording) - 8) * fraction)
+    data[at] ^= 0x5A
+    flipped = tmp_path_factory.mktemp("f") / "flipped.mcap"
+    flipped.write_bytes(bytes(data))
+    out = io.StringIO()
+    with redirect_stdout(out), redirect_stderr(io.StringIO()):
+        code = gcs.cli.main(["log", "info", str(flipped), "--json"])
+    info = json.loads(out.getvalue())
+    assert code == 0 and info["truncated"] is True and info["truncation"], at

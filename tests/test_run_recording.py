@@ -581,3 +581,41 @@ def test_radio_counters_reach_the_report(tmp_path: Path, planned):
     assert report.summary["tracking_error_m"] == [None] * size
     for name in FIGURES:
         assert (tmp_path / "report" / name).read_bytes().startswith(b"\x89PNG")
+
+
+def _upgrade_status(port: int, origin: str | None) -> bytes:
+    """The status line the live port answers an upgrade request from `origin` with."""
+    sock = socket.create_connection(("127.0.0.1", port), timeout=10)
+    key = base64.b64encode(os.urandom(16)).decode()
+    header = f"Origin: {origin}\r\n" if origin is not None else ""
+    sock.sendall(
+        (
+            f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+            f"Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n{header}\r\n"
+        ).encode()
+    )
+    head = b""
+    while b"\r\n" not in head:
+        byte = sock.recv(1)
+        if not byte:
+            break
+        head += byte
+    sock.close()
+    return head.split(b"\r\n")[0]
+
+
+@pytest.mark.slow
+def test_the_live_port_refuses_web_pages_of_other_origins(tmp_path: Path):
+    """Any web page the operator has open may try a WebSocket to 127.0.0.1: only local and
+    file origins, clients sending none, and the origins allowed connect; others get 403."""
+    clock, _ = _anchored_clock()
+    allowed = ("https://app.foxglove.dev",)
+    recorder = FlightRecorder(tmp_path / "o.mcap", clock, serve_port=0, allowed_origins=allowed)
+    try:
+        port = recorder.server_port
+        assert _upgrade_status(port, "https://evil.example").startswith(b"HTTP/1.1 403")
+        for origin in (None, "http://localhost:8080", "null", "https://app.foxglove.dev"):
+            assert _upgrade_status(port, origin).startswith(b"HTTP/1.1 101"), origin
+    finally:
+        recorder.close()

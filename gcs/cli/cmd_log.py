@@ -114,6 +114,7 @@ def describe(recording: Recording) -> dict[str, Any]:
         "outcome": recording.outcome,
         "truncated": recording.truncated,
         "truncation": recording.truncation,
+        "damaged": recording.damaged,
         "bytes_read": recording.bytes_read,
         "start_utc": None
         if start is None
@@ -174,6 +175,8 @@ def info_command(args: argparse.Namespace) -> int:
         "attachments",
         ", ".join(f"{name} ({size} B)" for name, size in data["attachments"].items()) or "-",
     )
+    if recording.damaged is not None:
+        top.add_row("[bold red]damaged[/]", recording.damaged)
     if recording.truncated:
         top.add_row(
             "[bold red]truncated[/]",

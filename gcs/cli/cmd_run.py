@@ -97,6 +97,14 @@ def register(mission_commands: argparse._SubParsersAction) -> None:
         "signing.key_file, is signed with MAVLink 2 signing): said loudly, and logged",
     )
     run.add_argument(
+        "--foxglove-allow-origin",
+        action="append",
+        metavar="ORIGIN",
+        help="with --foxglove: also let web pages of ORIGIN connect (e.g. "
+        "https://app.foxglove.dev; repeat for several). Local and file origins, and clients "
+        "that send none (the desktop app), always may; any other page is refused",
+    )
+    run.add_argument(
         "--no-lockstep",
         dest="lockstep",
         action="store_false",
@@ -254,7 +262,13 @@ def run_command(args: argparse.Namespace) -> int:
         if level != "info":
             Console(stderr=True, highlight=False).print(f"[bold yellow]{notice}[/]")
         try:
-            recorder = FlightRecorder(log_path, clock, force=args.force, serve_port=args.foxglove)
+            recorder = FlightRecorder(
+                log_path,
+                clock,
+                force=args.force,
+                serve_port=args.foxglove,
+                allowed_origins=tuple(getattr(args, "foxglove_allow_origin", None) or ()),
+            )
         except LiveServerError as error:
             raise InputError(None, "--foxglove", f"a free TCP port ({error})") from None
         except OSError as error:  # the folder exists but the system refuses the file

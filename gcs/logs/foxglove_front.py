@@ -9,6 +9,13 @@ asks for `foxglove.websocket.v1` it asks the SDK server (on a private loopback p
 `foxglove.sdk.v1` and answers the client with the name it asked for. After the handshake it
 relays bytes both ways untouched. The WebSocket accept key depends only on the client's key,
 so it stays valid.
+
+Browsers let any web page open a WebSocket to 127.0.0.1 and send its own `Origin`: a page the
+operator has open must not stream the fleet's positions. So the front answers 403 to an
+upgrade whose `Origin` is neither a local one (`http(s)://localhost`, `127.0.0.1`, `[::1]`,
+any port; a file's, `null` or `file://`) nor one the operator allowed
+(`gcs mission run --foxglove-allow-origin https://app.foxglove.dev`). A client that sends no
+`Origin` (the Foxglove desktop app, scripts) is no page: it is let in.
 """
 
 from __future__ import annotations
@@ -16,6 +23,8 @@ from __future__ import annotations
 import logging
 import socket
 import threading
+from collections.abc import Iterable
+from urllib.parse import urlsplit
 
 log = logging.getLogger(__name__)
 
@@ -28,6 +37,32 @@ HEAD_TIMEOUT_S = 5.0
 RELAY_CHUNK = 65_536
 
 _PROTOCOL_HEADER = b"sec-websocket-protocol:"
+_ORIGIN_HEADER = b"origin:"
+_LOCAL_HOSTS = frozenset({"localhost", "127.0.0.1", "::1"})
+_FORBIDDEN = b"HTTP/1.1 403 Forbidden\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
+
+
+def refused_origin(request: bytes, allowed: Iterable[str] = ()) -> str | None:
+    """The `Origin` of an upgrade request that may not connect (see the module docstring),
+    None when it may (no Origin, a local or file one, or one of `allowed`, compared without a
+    trailing slash and case-insensitively)."""
+    for line in request.split(b"\r\n")[1:]:
+        if not line.lower().startswith(_ORIGIN_HEADER):
+            continue
+        origin = line.split(b":", 1)[1].strip().decode("latin-1")
+        if origin in ("null", "") or origin.startswith("file://"):
+            return None
+        if origin.rstrip("/").lower() in {a.rstrip("/").lower() for a in allowed}:
+            return None
+        try:
+            parts = urlsplit(origin)
+            host = parts.hostname
+        except ValueError:
+            return origin
+        if parts.scheme in ("http", "https") and host in _LOCAL_HOSTS:
+            return None
+        return origin
+    return None
 
 
 class FoxgloveFront:
@@ -35,8 +70,9 @@ class FoxgloveFront:
     `start(backend_port)` is called, joins every client to the SDK server on
     `127.0.0.1:backend_port` (see the module docstring). `close()` ends every relay."""
 
-    def __init__(self, host: str, port: int) -> None:
+    def __init__(self, host: str, port: int, allowed_origins: Iterable[str] = ()) -> None:
         self.backend_port: int | None = None
+        self.allowed_origins = tuple(allowed_origins)
         self._listener = socket.create_server((host, port))
         self.port: int = self._listener.getsockname()[1]
         self._lock = threading.Lock()
@@ -88,6 +124,12 @@ class FoxgloveFront:
         try:
             client.settimeout(HEAD_TIMEOUT_S)
             request = _read_head(client)
+            origin = refused_origin(request, self.allowed_origins)
+            if origin is not None:
+                log.warning("Foxglove client from %s refused (not a local origin)", origin)
+                client.sendall(_FORBIDDEN)
+                _close(client)
+                return
             request, asked = _translate_request(request)
             backend = socket.create_connection(("127.0.0.1", self.backend_port), HEAD_TIMEOUT_S)
             if not self._keep(backend):

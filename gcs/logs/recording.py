@@ -293,6 +293,7 @@ class FlightRecorder:
         *,
         force: bool = False,
         serve_port: int | None = None,
+        allowed_origins: tuple[str, ...] = (),
         unix_now: Callable[[], int] = time.time_ns,
     ) -> None:
         self.path = Path(path)
@@ -303,7 +304,7 @@ class FlightRecorder:
         self._server = None
         self._front: FoxgloveFront | None = None
         if serve_port is not None:
-            self._server, self._front = _serve_live(self.context, serve_port)
+            self._server, self._front = _serve_live(self.context, serve_port, allowed_origins)
         try:
             self._writer = foxglove.open_mcap(
                 self.path,
@@ -680,12 +681,12 @@ class FlightRecorder:
             self._server.stop()
 
 
-def _serve_live(context: foxglove.Context, port: int):
+def _serve_live(context: foxglove.Context, port: int, allowed_origins: tuple[str, ...] = ()):
     """foxglove-sdk's WebSocket server on a private loopback port behind a `FoxgloveFront` on
     127.0.0.1:`port` (clients of both subprotocol names; see `gcs.logs.foxglove_front`). A
     taken port is refused (`LiveServerError`) before anything else starts."""
     try:
-        front = FoxgloveFront("127.0.0.1", port)
+        front = FoxgloveFront("127.0.0.1", port, allowed_origins)
     except OSError as error:
         raise LiveServerError(f"127.0.0.1:{port}: {error.strerror or error}") from None
     try:

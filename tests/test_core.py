@@ -89,6 +89,20 @@ def test_a_stall_pauses_the_mission_where_the_uavs_stand(plan):
     assert run.run_json["max_tracking_error_m"] < plan.mission.safety_margin
 
 
+def test_a_stall_longer_than_the_gcs_failsafe_resumes_where_the_uavs_stand(plan):
+    """The ground station stops for 6.5 s (no lockstep: SITL, real vehicles): longer than the
+    vehicles' GCS failsafe (5 s), so they brake (BRAKE, out of guided flight) before the
+    backlog is read. They flew the formation until it stopped: it resumes where they stand,
+    not at the last tick (which pulled them 9 m back along the path, past rho_c), and each
+    is taken back to guided flight."""
+    run = fly(plan, gcs_stalls=((13.0, 19.5),))
+    (stall,) = run.stalls
+    assert stall.paused_at >= stall.stood_at + 1.0  # they flew on about 1 s, then braked
+    assert "rejoin" in kinds(run)
+    assert run.run_json["completed"] is True
+    assert run.run_json["max_tracking_error_m"] < plan.mission.safety_margin
+
+
 def test_a_stall_that_ends_in_the_tick_waits_for_the_backlog(plan):
     """The ground station stopped after reading its links and before its tick (the window
     where a SIGSTOP or a starved CPU hits a busy loop): it wakes up in the tick with the

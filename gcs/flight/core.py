@@ -433,6 +433,7 @@ class GroundStation:
         self.radio_report: dict | None = None  # the radio medium's last report
         self._last_awake: float | None = None  # the last tick (or the end of a stall)
         self._last_awake_t: float | None = None  # ... and its mission time
+        self._followed_at_tick: list[int] = []  # UAVs following at the last tick (stalls)
         self._pending_stall: float | None = None  # a stall found by `tick`, resumed by `receive`
         self.stalls: list[Stall] = []
         self.tracking_now = np.full(size, np.nan)
@@ -781,6 +782,9 @@ class GroundStation:
         self._last_awake = now
         t = self.clock.mission_time(now)
         self._last_awake_t = t
+        self._followed_at_tick = [
+            i for i, driver in enumerate(self.drivers) if driver.phase == Phase.FOLLOWING
+        ]
         self.mission_time = t
         self._handle_interrupts(now)
         self._handle_requests(t, now)
@@ -880,11 +884,15 @@ class GroundStation:
         self._event(MonitorEvent(paused_at, "warning", "stall", text), now)
 
     def _following(self) -> list[int]:
-        """The UAVs following the formation, with a known position."""
+        """The UAVs that followed the formation at the last tick, with a known position: a
+        stall long enough for their own GCS failsafe (BRAKE) has taken them out of guided
+        flight by the time the backlog is read, yet they flew the formation until it stopped,
+        and where they stand says where it stands."""
         return [
             i
-            for i, driver in enumerate(self.drivers)
-            if driver.phase == Phase.FOLLOWING and self.tracks[i].last_position is not None
+            for i in self._followed_at_tick
+            if self.drivers[i].phase in (Phase.FOLLOWING, Phase.HOLDING)
+            and self.tracks[i].last_position is not None
         ]
 
     def _where_the_formation_stands(self, t_from: float, t_to: float) -> float:

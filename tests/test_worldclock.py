@@ -158,3 +158,14 @@ def test_hold_back_never_rewinds_a_clock_below_its_floor():
     assert clock.hold_back(51.4, 1.5) == pytest.approx(0.5)  # read 2.0, held to 1.5
     clock.freeze(51.5)
     assert clock.hold_back(51.6, 0.0) == 0.0  # frozen: the stall logic owns it
+
+
+def test_hold_back_never_goes_below_a_mission_time_already_read():
+    """Between two ticks the recorder stamped records with the clock's reading: holding the
+    clock back below it would make log times run backwards (test_log_flight caught it)."""
+    clock = anchored()  # mission time -5 at wall 50
+    stamped = clock.mission_time(51.0)  # 0.0: a record written at this log time
+    assert clock.hold_back(51.0, -4.0) == 0.0  # held to what was read, not below
+    assert clock.mission_time(51.0) == pytest.approx(stamped)
+    assert clock.peek(51.2) == pytest.approx(1.0)  # and runs on from there
+    assert clock.hold_back(51.2, 0.5) == pytest.approx(0.5)  # peeked, not read: free to hold

@@ -38,6 +38,7 @@ class MissionClock:
         self._frozen_at: float | None = None  # mission time it stands at, while frozen
         self.epoch_ns: int | None = None  # Unix ns at mission time 0
         self.held_back_s = 0.0  # mission seconds `hold_back` took off the clock, in all
+        self._seen = -float("inf")  # the latest mission time read (`mission_time`)
 
     @property
     def anchored(self) -> bool:
@@ -61,6 +62,15 @@ class MissionClock:
         return (now - self._zero) * self.speedup
 
     def mission_time(self, now: float) -> float:
+        """The mission time at `now` (what the loop, the recorder and the drivers use: noted, so
+        that `hold_back` never goes below anything already read, written or sent)."""
+        t = self.peek(now)
+        if t > self._seen:
+            self._seen = t
+        return t
+
+    def peek(self, now: float) -> float:
+        """`mission_time(now)` without noting it (to decide whether to hold the clock back)."""
         if self._frozen_at is not None:
             return self._frozen_at
         return max((now - self._zero) * self.speedup, self._floor)
@@ -91,8 +101,8 @@ class MissionClock:
         off the clock."""
         if self._frozen_at is not None:
             return 0.0
-        before = self.mission_time(now)
-        value = max(mission_time, self._floor)
+        before = self.peek(now)
+        value = max(mission_time, self._floor, self._seen)  # log times stay monotonic
         if value >= before:
             return 0.0
         self._zero = now - value / self.speedup

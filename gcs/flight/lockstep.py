@@ -61,7 +61,7 @@ class WorldSync:
         if not clock.anchored:
             return []
         released = self._hold(now, clock)
-        t = clock.mission_time(now)
+        t = clock.peek(now)
         base = self._ticked if self._ticked is not None else t
         self._cap = max(self._cap, base + self.lead_s)
         self.master.publish(clock.wall_at(0.0), clock.speedup, self._cap)
@@ -81,7 +81,7 @@ class WorldSync:
                 self._moved[slot] = (p, now)
         if not joined:
             return released
-        t = clock.mission_time(now)
+        t = clock.peek(now)
         slowest = min(joined, key=joined.get)
         if t <= joined[slowest] + self.lag_s:
             return released

@@ -174,10 +174,12 @@ def test_a_uav_out_of_range_loses_its_setpoints_holds_and_comes_back_through_a_r
     dropped = [r for r in setpoints if r["delay_ms"] is None]
     assert dropped, "no setpoint was dropped"
     first_drop = dropped[0]["sim_s"]
-    # every setpoint before the crossing went through; the first one after it within one
-    # setpoint period (plus the medium's 10 ms of topology reuse) was dropped
+    # every setpoint before the crossing went through; the first one after it (the sender's
+    # next, one period later, or half a period more when scheduling delays this test's sender:
+    # 6 ms of sim time late once, in a quiet CI run) was dropped, give or take the medium's
+    # 10 ms of topology reuse
     assert all(r["delay_ms"] is not None for r in setpoints if r["sim_s"] < crossing - 0.011)
-    assert crossing - 0.011 <= first_drop <= crossing + SETPOINT_PERIOD_S + 0.011
+    assert crossing - 0.011 <= first_drop <= crossing + 1.5 * SETPOINT_PERIOD_S + 0.011
     back = next(r for r in setpoints if r["sim_s"] > first_drop and r["delay_ms"] is not None)
     blackout = [r for r in setpoints if first_drop <= r["sim_s"] < back["sim_s"]]
     assert all(r["delay_ms"] is None for r in blackout) and len(blackout) > 20

@@ -401,20 +401,30 @@ while True:
 
 
 # --------------------------------------------------------------------------- live (WebSocket)
+def send_upgrade(
+    sock: socket.socket, port: int, subprotocol: str, origin: str | None = None
+) -> str:
+    """Send a WebSocket upgrade request for `subprotocol` (from `origin`: a browser page's
+    header); returns the client key."""
+    key = base64.b64encode(os.urandom(16)).decode()
+    header = f"Origin: {origin}\r\n" if origin is not None else ""
+    sock.sendall(
+        (
+            f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+            f"Sec-WebSocket-Protocol: {subprotocol}\r\n{header}\r\n"
+        ).encode()
+    )
+    return key
+
+
 def foxglove_connect(
     port: int, timeout: float = 10.0, subprotocol: str = "foxglove.sdk.v1"
 ) -> socket.socket:
     """A WebSocket client of Foxglove's protocol (stdlib only): the upgrade handshake, which
     must name the subprotocol the client asked for."""
     sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
-    key = base64.b64encode(os.urandom(16)).decode()
-    sock.sendall(
-        (
-            f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
-            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
-            f"Sec-WebSocket-Protocol: {subprotocol}\r\n\r\n"
-        ).encode()
-    )
+    key = send_upgrade(sock, port, subprotocol)
     head = b""
     while b"\r\n\r\n" not in head:
         byte = sock.recv(1)
@@ -586,15 +596,7 @@ def test_radio_counters_reach_the_report(tmp_path: Path, planned):
 def _upgrade_status(port: int, origin: str | None) -> bytes:
     """The status line the live port answers an upgrade request from `origin` with."""
     sock = socket.create_connection(("127.0.0.1", port), timeout=10)
-    key = base64.b64encode(os.urandom(16)).decode()
-    header = f"Origin: {origin}\r\n" if origin is not None else ""
-    sock.sendall(
-        (
-            f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
-            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
-            f"Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n{header}\r\n"
-        ).encode()
-    )
+    send_upgrade(sock, port, "foxglove.sdk.v1", origin)
     head = b""
     while b"\r\n" not in head:
         byte = sock.recv(1)

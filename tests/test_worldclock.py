@@ -143,7 +143,7 @@ def test_a_follower_that_never_moves_again_is_given_up_on(master):
     assert clock.mission_time(79.9) == pytest.approx(-5.0 + WORLD_LAG_S)
     (text,) = world.step(80.0, clock)
     assert text.startswith("vehicles 1-4: no progress for 30 s")
-    assert master.progress()[0] == math.inf and world.summary()["released"] == ["vehicles 1-4"]
+    assert master.progress()[0] == math.inf and world.summary(clock)["released"] == ["vehicles 1-4"]
     world.step(81.0, clock)  # the world runs on without it, from where it was held
     assert clock.mission_time(81.0) == pytest.approx(-5.0 + WORLD_LAG_S + 1.1 * SPEEDUP)
     follower.close()

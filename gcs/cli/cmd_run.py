@@ -384,7 +384,7 @@ def run_command(args: argparse.Namespace) -> int:
         result = loop.run()
         data = run_json(result, str(log_path), mission.safety_margin)
         data["signing"] = signing.summary()
-        data["lockstep"] = world.summary() if world is not None else {"enabled": False}
+        data["lockstep"] = world.summary(clock) if world is not None else {"enabled": False}
         data["recording"] = {"ok": recorder.error is None, "error": recorder.error}
         recorder.outcome(data)
         if result.limits_refused:  # before take-off: the mission, not the flight, was wrong

@@ -48,7 +48,6 @@ class WorldSync:
         self.lead_s = lead_s
         self.lag_s = lag_s
         self.stuck_wall_s = stuck_wall_s
-        self.held_s = 0.0  # mission seconds taken off the clock, in all
         self.holds = 0  # how many times the clock was held back
         self._ticked: float | None = None  # mission time of the last tick
         self._cap = -math.inf
@@ -97,17 +96,15 @@ class WorldSync:
             self.released.append(name)
             return [text]
         floor = self._ticked if self._ticked is not None else -math.inf
-        taken = clock.hold_back(now, max(joined[slowest] + self.lag_s, floor))
-        if taken > 0:
-            self.held_s += taken
+        if clock.hold_back(now, max(joined[slowest] + self.lag_s, floor)) > 0:
             self.holds += 1
         return released
 
-    def summary(self) -> dict:
-        """The run JSON's `lockstep` object."""
+    def summary(self, clock: MissionClock) -> dict:
+        """The run JSON's `lockstep` object (the seconds held are the clock's own count)."""
         return {
             "enabled": True,
-            "held_s": self.held_s,
+            "held_s": clock.held_back_s,
             "holds": self.holds,
             "released": list(self.released),
         }

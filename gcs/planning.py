@@ -112,6 +112,11 @@ def mission_problem(
     )
 
 
+#: `plan_mission` passes the search's progress on at most this often (the search asks
+#: whether to stop at every expansion).
+PROGRESS_INTERVAL_S = 0.1
+
+
 def plan_mission(
     mission: Mission,
     *,
@@ -136,10 +141,12 @@ def plan_mission(
     conns = mission.fleet.connections if connections is None else tuple(connections)
     conn_key = "fleet.connections" if connections is None else "--connect"
     began = clock()
+    next_report = [0.0]
 
     def progress(state: SearchProgress) -> bool:
         elapsed = clock() - began
-        if on_progress is not None:
+        if on_progress is not None and elapsed >= next_report[0]:
+            next_report[0] = elapsed + PROGRESS_INTERVAL_S
             on_progress(state, elapsed)
         return time_limit_s is not None and elapsed >= time_limit_s
 

@@ -153,8 +153,7 @@ def graph_nodes(problem: PathProblem) -> Nodes:
     # Flat: the node lies on the margin of its own obstacle (a side next to its corner).
     flat = np.zeros(len(all_pts), bool)
     if len(obs_pts):
-        own = shapely.distance(shapely.points(obs_pts), obstacles.geometries[obs_owner])
-        flat[base:] = own <= rho + DISTANCE_TOLERANCE
+        flat[base:] = obstacles.near_own(obs_pts, obs_owner, rho + DISTANCE_TOLERANCE)
 
     label = _merge_labels(all_pts)
     rep = label == np.arange(len(all_pts))

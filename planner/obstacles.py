@@ -25,6 +25,12 @@ class Obstacles:
     #: at once on obstacles of at most `UNION_VERTICES` vertices (it then costs milliseconds).
     UNION_AFTER = 200_000
     UNION_VERTICES = 2_000
+    #: Polygons of more vertices than this are queried through their edges (an STRtree of
+    #: segments) and a prepared polygon for what lies inside, so that a query costs the
+    #: logarithm of the polygon's size, not its size (`_Large`): node building and clearance
+    #: tests stay near-linear in a polygon's vertices (a 10,000-vertex polygon: 4.4 s to
+    #: 0.1 s for its nodes). Footprints and drawn obstacles are smaller and keep one entry.
+    LARGE_POLYGON = 64
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_tested", [0])  # segments tested so far (a counter)
@@ -135,7 +141,7 @@ class Obstacles:
             and "_prepared_union" not in self.__dict__
             and len(self.vertices[0]) > self.UNION_VERTICES
         ):
-            near, _ = self._tree.query(lines, predicate="dwithin", distance=distance)
+            near, _ = self.pairs_within(lines, distance)
             hit[near] = True  # (a solid is an area: a segment inside it is at distance 0)
             if self._wall_points is not None:  # GEOS skips a degenerate line: as points
                 hit |= shapely.dwithin(self._wall_points, lines, distance)
@@ -162,9 +168,49 @@ class Obstacles:
         hit = np.zeros(len(flat), bool)
         if len(flat) == 0 or len(self) == 0:
             return hit.reshape(points.shape[:-1])
-        near, _ = self._tree.query(shapely.points(flat), predicate="dwithin", distance=distance)
+        near, _ = self.pairs_within(shapely.points(flat), distance)
         hit[near] = True
         return hit.reshape(points.shape[:-1])
+
+    def pairs_within(self, geoms: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
+        """Every (input, obstacle) pair of `geoms` (points or lines) and indices into
+        `geometries` where the input comes within `distance` (inclusive) of the obstacle or
+        lies inside a solid one, as an STRtree `dwithin` query."""
+        large = self._large
+        if large is None:
+            return self._tree.query(geoms, predicate="dwithin", distance=distance)
+        first, second = large.small_tree.query(geoms, predicate="dwithin", distance=distance)
+        near_first, near_second = large.near(geoms, distance)
+        return (
+            np.concatenate([first, near_first]),
+            np.concatenate([large.small[second], large.large[near_second]]),
+        )
+
+    def near_own(self, points: np.ndarray, owner: np.ndarray, distance: float) -> np.ndarray:
+        """True where points[i] (n, 2) lies within `distance` (inclusive) of obstacle
+        owner[i] (an index into `geometries`)."""
+        where = shapely.points(np.asarray(points, float).reshape(-1, 2))
+        large = self._large
+        if large is None:
+            return shapely.distance(where, self._geometries[owner]) <= distance
+        near = np.zeros(len(where), bool)
+        slot = large.slot_of(owner)
+        rest = np.flatnonzero(slot < 0)
+        near[rest] = shapely.distance(where[rest], self._geometries[owner[rest]]) <= distance
+        big = np.flatnonzero(slot >= 0)
+        near[big] = shapely.dwithin(large.prepared[slot[big]], where[big], distance)
+        return near
+
+    @cached_property
+    def _large(self) -> _Large | None:
+        """The queries' split of the obstacles when a polygon has more than `LARGE_POLYGON`
+        vertices, else None (every query uses the one STRtree)."""
+        sizes = np.array([len(p) for p in self.polygons], np.intp)
+        if not np.any(sizes > self.LARGE_POLYGON):
+            return None
+        is_large = np.zeros(len(self._geometries), bool)
+        is_large[: len(sizes)] = sizes > self.LARGE_POLYGON
+        return _Large.of(self._geometries, is_large, self.polygons)
 
     @cached_property
     def vertices(self) -> tuple[np.ndarray, np.ndarray]:
@@ -222,10 +268,81 @@ class Obstacles:
 
     def _nearest(self, geoms: np.ndarray) -> np.ndarray:
         """Distance from each geometry to its nearest obstacle, in input order."""
-        (inputs, _), dist = self._tree.query_nearest(geoms, return_distance=True, all_matches=False)
-        out = np.empty(len(geoms))
-        out[inputs] = dist
+        large = self._large
+        if large is None:
+            return _nearest_in(self._tree, geoms)
+        out = np.minimum(_nearest_in(large.small_tree, geoms), _nearest_in(large.edge_tree, geoms))
+        out[large.inside(geoms)] = 0.0
         return out
+
+
+def _nearest_in(tree: shapely.STRtree, geoms: np.ndarray) -> np.ndarray:
+    """Distance from each geometry to its nearest one in `tree` (inf for an empty tree)."""
+    out = np.full(len(geoms), np.inf)
+    if len(tree):
+        (inputs, _), dist = tree.query_nearest(geoms, return_distance=True, all_matches=False)
+        out[inputs] = dist
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _Large:
+    """The obstacles split for queries (`Obstacles.LARGE_POLYGON`): `small_tree` over the
+    others (`small`: their indices into the geometries); the large polygons (`large`: their
+    indices) prepared (GEOS indexes their edges: a distance or containment test is then
+    logarithmic) in `large_tree`, and their edges as lines in `edge_tree` for nearest
+    distances (`edge_owner`: each edge's polygon), which preparing does not speed up."""
+
+    small: np.ndarray
+    small_tree: shapely.STRtree
+    large: np.ndarray
+    prepared: np.ndarray
+    large_tree: shapely.STRtree
+    edge_owner: np.ndarray
+    edge_tree: shapely.STRtree
+
+    @classmethod
+    def of(cls, geometries: np.ndarray, is_large: np.ndarray, polygons) -> _Large:
+        large = np.flatnonzero(is_large)
+        small = np.flatnonzero(~is_large)
+        rings = [np.asarray(polygons[k]) for k in large]
+        edges = np.concatenate([np.stack([r, np.roll(r, -1, axis=0)], axis=1) for r in rings])
+        # copies: preparing leaves `geometries` as they are
+        prepared = np.array([shapely.Polygon(r) for r in rings], dtype=object)
+        shapely.prepare(prepared)
+        return cls(
+            small=small,
+            small_tree=shapely.STRtree(geometries[small]),
+            large=large,
+            prepared=prepared,
+            large_tree=shapely.STRtree(prepared),
+            edge_owner=np.repeat(large, [len(r) for r in rings]),
+            edge_tree=shapely.STRtree(shapely.linestrings(edges)),
+        )
+
+    def slot_of(self, index: np.ndarray) -> np.ndarray:
+        """Position in `large` of each obstacle index, -1 for a small one."""
+        slot = np.full(int(max(self.large.max(), np.max(index, initial=0))) + 1, -1, np.intp)
+        slot[self.large] = np.arange(len(self.large))
+        return slot[index]
+
+    def near(self, geoms: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
+        """(input, position in `large`) pairs where the input comes within `distance` of the
+        large polygon or lies inside it: bounding boxes grown by `distance` first, then
+        the prepared test."""
+        bounds = shapely.bounds(geoms) + np.array([-distance, -distance, distance, distance])
+        first, second = self.large_tree.query(shapely.box(*bounds.T))
+        keep = shapely.intersects(self.prepared[second], geoms[first])  # cheaper: first
+        rest = np.flatnonzero(~keep)
+        keep[rest] = shapely.dwithin(self.prepared[second[rest]], geoms[first[rest]], distance)
+        return first[keep], second[keep]
+
+    def inside(self, geoms: np.ndarray) -> np.ndarray:
+        """Which inputs meet a large polygon (are at distance 0 from it)."""
+        first, second = self.large_tree.query(geoms)  # bounding boxes
+        hit = np.zeros(len(geoms), bool)
+        hit[first[shapely.intersects(self.prepared[second], geoms[first])]] = True
+        return hit
 
 
 @dataclass(frozen=True, eq=False)

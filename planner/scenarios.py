@@ -7,6 +7,8 @@
   A and B near opposite corners.
 * `city_grid(cols, rows, block, street)`: a Manhattan grid of square blocks with streets all
   round; A and B in the corner intersections.
+* `fine_polygon(vertices)`: one seven-lobed polygon drawn with many vertices (a traced
+  coastline or a building digitised finely), between A and B.
 
 Random rectangles are resampled until they keep A, B and the parking rows (the paper's rays,
 clipped to the area, which covers every finite row) clear by the safety margin, with a spare
@@ -204,6 +206,26 @@ def city_grid(
         safety_margin,
         radio_range,
         (0.0, 0.0, width, height),
+    )
+
+
+def fine_polygon(vertices: int, safety_margin: float = 5.0, radio_range: float = 120.0) -> Scenario:
+    """One polygon of `vertices` vertices, radius 50 +- 8 m in seven lobes, centred at
+    (150, 50); A = (0, 0), B = (300, 100), both headings 0: the path wraps its north side."""
+    angle = np.linspace(0.0, 2.0 * math.pi, vertices, endpoint=False)
+    radius = 50.0 + 8.0 * np.sin(7.0 * angle)
+    ring = np.column_stack([150.0 + radius * np.cos(angle), 50.0 + radius * np.sin(angle)])
+    return Scenario(
+        name=f"fine-polygon-{vertices}",
+        obstacles=Obstacles(polygons=(ring,)),
+        start=np.array([0.0, 0.0]),
+        goal=np.array([300.0, 100.0]),
+        start_angle_deg=0.0,
+        goal_angle_deg=0.0,
+        safety_margin=safety_margin,
+        radio_range=radio_range,
+        rectangles=np.zeros((0, 5)),
+        area=(-50.0, -50.0, 350.0, 150.0),
     )
 
 

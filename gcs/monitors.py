@@ -234,6 +234,7 @@ class LinkMonitor:
         self.link_timeout_s = link_timeout_s
         self.lost = np.zeros(fleet_size, dtype=bool)
         self.ever_lost = np.zeros(fleet_size, dtype=bool)
+        self.lost_at = np.full(fleet_size, -np.inf)  # mission time of each UAV's last loss
         # silence (wall s) when a UAV was declared gone; lost until a newer message arrives
         self._forced = np.full(fleet_size, np.inf)
 
@@ -260,6 +261,7 @@ class LinkMonitor:
                     t, "warning", "link_back", f"UAV {index + 1}: link back", int(index) + 1
                 )
             )
+        self.lost_at[now_lost & ~self.lost] = t
         self.ever_lost |= now_lost
         self.lost = now_lost
         return events
@@ -272,4 +274,5 @@ class LinkMonitor:
             return []
         self.lost[index] = True
         self.ever_lost[index] = True
+        self.lost_at[index] = t
         return [MonitorEvent(t, "error", "link_lost", f"UAV {index + 1}: {why}", index + 1, True)]

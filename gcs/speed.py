@@ -162,9 +162,16 @@ class SpeedChanges:
         self.records.append(record)
         return record
 
-    def acknowledge(self, record: SpeedBroadcast, uav: int, reaction_s: float) -> None:
+    def acknowledge(
+        self, record: SpeedBroadcast, uav: int, reaction_s: float, sets_lead: bool = True
+    ) -> None:
+        """UAV `uav` acknowledged `record` after `reaction_s` (T_dv). `sets_lead` False: its
+        link was lost meanwhile, so the delay measures the outage, not the protocol's
+        reaction, and does not raise the lead of later changes (a vehicle process stopped
+        9 s once pushed a resume 18 s into the future)."""
         record.acks[uav] = reaction_s
-        self.worst_reaction_s = max(self.worst_reaction_s, reaction_s)
+        if sets_lead:
+            self.worst_reaction_s = max(self.worst_reaction_s, reaction_s)
 
     def as_json(self) -> list[dict]:
         return [r.as_json() for r in self.records]

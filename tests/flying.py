@@ -172,13 +172,15 @@ class Flight:
     def pid(self) -> int:
         return self.process.pid
 
-    def wait_for(self, needle: str, timeout: float = 60.0, start: int = 0) -> int:
-        """Index of the first stderr line from `start` on containing `needle`."""
+    def wait_for(self, needle: str | tuple[str, ...], timeout: float = 60.0, start: int = 0) -> int:
+        """Index of the first stderr line from `start` on containing `needle` (or any of a
+        tuple of needles)."""
+        needles = (needle,) if isinstance(needle, str) else needle
         deadline = time.monotonic() + timeout
         with self._changed:
             while True:
                 for index in range(start, len(self.lines)):
-                    if needle in self.lines[index]:
+                    if any(n in self.lines[index] for n in needles):
                         return index
                 start = len(self.lines)
                 remaining = deadline - time.monotonic()

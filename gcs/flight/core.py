@@ -124,6 +124,12 @@ STALL_WALL_FLOOR_S = 0.25
 STILL_BEFORE_LANDING_S = 0.5
 #: After the last landing, how long (wall s) the GCS waits for disarming and commands in flight.
 SETTLE_WALL_S = 3.0
+#: A UAV whose link came back rejoins the formation only after this long (mission s) in
+#: guided flight within its tracking allowance: two heartbeats, so a mode its autopilot took
+#: while cut off (BRAKE, its own failsafe) is known before the formation moves again. (With
+#: none, a formation resumed at the link's return, 0.8 s before that UAV's BRAKE was read,
+#: and left it 5.1 m behind.)
+REJOIN_SETTLE_S = 2.0
 #: Why an operator's speed change is refused while a stations mission's fleet holds.
 _HOLDING = (
     "every UAV holds its station: the formation stands still until the return (gcs return); "
@@ -422,6 +428,8 @@ class GroundStation:
         self._resume_speed: float | None = None
         self._link_deadline: float | None = None
         self._rejoining: set[int] = set()  # UAVs lost, to be back on their targets
+        # mission time since which each rejoining UAV has flown guided within its allowance
+        self._rejoined_since: dict[int, float] = {}
         self.interrupts = 0
         self._handled_interrupts = 0
         self._samples: list[tuple[int, float, np.ndarray, bool]] = []  # uav, t, xyz, true?
@@ -873,10 +881,13 @@ class GroundStation:
                     track.last_sample_time = paused(track.last_sample_time, paused_at, stood)
             for driver in self.drivers:
                 driver.on_mission_clock_changed(now)
-            text += (
-                f"mission clock held back {held_back:.2f} s: the formation resumes where the "
-                f"UAVs stand (t={paused_at:.2f} s)"
-                + (", from a standstill" if resumed_at > paused_at else "")
+            moved = (
+                f"mission clock held back {held_back:.2f} s"
+                if held_back > 0
+                else f"mission clock set {-held_back:.2f} s ahead (a standing start)"
+            )
+            text += f"{moved}: the formation resumes where the UAVs stand (t={paused_at:.2f} s)" + (
+                ", from a standstill" if resumed_at > paused_at else ""
             )
         else:
             text += "they kept up with the formation"
@@ -1746,7 +1757,7 @@ class GroundStation:
                 behind = policy.behind(t, states)
                 text = "; ".join(f"UAV {u}: {why}" for u, why in behind) or policy.current.text()
                 self.land_everyone(
-                    f"the formation held {t - policy.current.episode_since:.1f} s and the "
+                    f"the formation held {policy.held_s(t):.1f} s and the "
                     f"error budget was not restored ({text})",
                     now,
                 )
@@ -1801,8 +1812,9 @@ class GroundStation:
     def _link_policy(self, t: float, now: float) -> None:
         """A UAV lost (link, or its own failsafe) freezes the formation. When its link is back,
         a UAV that holds is taken back to guided flight, and the formation stays frozen until
-        every such UAV has rejoined its target (within `vehicle.tracking_allowance`), so that
-        no UAV is asked to catch up a formation that ran on. Without an operator, a UAV still
+        every such UAV has rejoined its target (within `vehicle.tracking_allowance`, in guided
+        flight, for `REJOIN_SETTLE_S`), so that no UAV is asked to catch up a formation that
+        ran on. Without an operator, a UAV still
         lost or not rejoined after `link_wait_s`, or one that lands by itself, lands everyone."""
         if self.aborting:
             return
@@ -1831,15 +1843,26 @@ class GroundStation:
                 self._link_deadline = t + self.options.link_wait_s
         if self.frozen_by != "link" or self.options.interactive:
             self._rejoining.clear()  # the operator decided
+            self._rejoined_since.clear()
             return
         landing = [i for i in unavailable if self.drivers[i].phase == Phase.LANDING]
         if landing:
             self.land_everyone(f"UAV {landing[0] + 1} {unavailable[landing[0]]}", now)
             return
         tolerance = self.mission.vehicle.tracking_allowance
-        away = [i for i in self._rejoining if not self.tracking_now[i] <= tolerance]
+        for i in self._rejoining:
+            if i in unavailable or not self.tracking_now[i] <= tolerance:
+                self._rejoined_since.pop(i, None)
+            else:
+                self._rejoined_since.setdefault(i, t)
+        away = [
+            i
+            for i in self._rejoining
+            if t - self._rejoined_since.get(i, math.inf) < REJOIN_SETTLE_S
+        ]
         if not unavailable and not away:
             self._rejoining.clear()
+            self._rejoined_since.clear()
             self._link_deadline = None
             self._resume(now)
         elif self._link_deadline is not None and t >= self._link_deadline:
@@ -1862,7 +1885,11 @@ class GroundStation:
                 reaction = None
                 if result == mavlink.MAV_RESULT_ACCEPTED and seq in driver.speed_acks:
                     reaction = (driver.speed_acks[seq] - record.broadcast_wall) * speedup
-                    self.speeds.acknowledge(record, uav, reaction)
+                    # (a link lost since the broadcast: the delay is the outage's)
+                    outage = self.links.lost[uav - 1] or (
+                        self.links.lost_at[uav - 1] >= record.change.requested_s
+                    )
+                    self.speeds.acknowledge(record, uav, reaction, sets_lead=not outage)
                     kind = SpeedRecordKind.ACK
                 elif result is None:
                     record.refused[uav] = "no answer"

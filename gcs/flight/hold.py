@@ -22,9 +22,10 @@ UAV decelerates within a_max and holds its current target; the mission clock run
 formation distance S stands still. It resumes (the speed it had, from t + w/2 again) once
 every following UAV is back within `resume_m` of its target (the tracking allowance), its
 telemetry current. A hold that has not restored the budget
-after `give_up_s` mission seconds (holds that follow each other within that time, stop and go,
-count as one) (the link-loss policy's `link_wait_s`) lands everyone where
-they are, as a lost link does. Scheduled and leader speed changes that fall due while holding
+after `give_up_s` mission seconds of holding (the link-loss policy's `link_wait_s`) lands
+everyone where they are, as a lost link does. Holds that follow each other within that time
+(stop and go) count as one: their held seconds add up, the flight between them does not (two
+faults 6 s apart, holding 1.5 s and 2 s, once counted as 10 s held and landed the fleet). Scheduled and leader speed changes that fall due while holding
 become the speed the formation resumes with; an operator's change, or a freeze of another
 cause (link, take-off, Ctrl-C), takes the formation over from the hold.
 
@@ -44,9 +45,10 @@ HOLD_LAG_S = 1.0
 @dataclass(frozen=True)
 class Hold:
     """One hold of the formation, mission times: decided at `since`, the profile stopping at
-    `stop_s`, the reference standing still from `standing_s` (half a window later); part of
-    an episode of holds since `episode_since` (a hold that starts within `give_up_s` of the
-    end of the previous one continues its episode: stop and go counts as one hold). Ended at
+    `stop_s`, the reference standing still from `standing_s` (half a window later);
+    `held_before_s`: the seconds held by the earlier holds of its episode (a hold that starts
+    within `give_up_s` of the end of the previous one continues its episode: stop and go
+    counts as one hold). Ended at
     `until` (None: still holding when the run ended) because of `outcome`: "resumed",
     "landed", "operator" (an operator's speed change) or "superseded" (a freeze of another
     cause took over). `reasons`: the UAVs (1-based) behind when it started, and why."""
@@ -55,7 +57,7 @@ class Hold:
     stop_s: float
     standing_s: float
     reasons: tuple[tuple[int, str], ...]
-    episode_since: float
+    held_before_s: float
     until: float | None = None
     outcome: str | None = None
 
@@ -155,17 +157,23 @@ class HoldPolicy:
     def start(
         self, t: float, stop_s: float, standing_s: float, reasons: list[tuple[int, str]]
     ) -> Hold:
-        episode = t
+        before = 0.0
         if self.finished:
             last = self.finished[-1]
             if t - last.until < self.give_up_s:
-                episode = last.episode_since
-        self.current = Hold(t, stop_s, standing_s, tuple(reasons), episode)
+                before = last.held_before_s + last.duration_s
+        self.current = Hold(t, stop_s, standing_s, tuple(reasons), before)
         return self.current
 
+    def held_s(self, t: float) -> float:
+        """Mission seconds the episode of the hold in progress has held by `t` (0: none)."""
+        if self.current is None:
+            return 0.0
+        return self.current.held_before_s + t - self.current.since
+
     def overdue(self, t: float) -> bool:
-        """The hold (its episode) has lasted `give_up_s` without restoring the budget."""
-        return self.current is not None and t - self.current.episode_since >= self.give_up_s
+        """The hold's episode has held `give_up_s` without restoring the budget."""
+        return self.current is not None and self.held_s(t) >= self.give_up_s
 
     def end(self, t: float, outcome: str) -> Hold | None:
         """End the hold in progress (if any) at `t`; returns it, finished."""

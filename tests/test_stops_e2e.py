@@ -1,0 +1,95 @@
+"""Stopped processes on the wall clock, as with real autopilots (`--no-lockstep`: nothing
+waits for a stopped process), end to end (real `gcs` and `vehicles` processes over loopback
+UDP): the ground station stopped (SIGSTOP) for 1 s, then one vehicle process (UAVs 3 and 4)
+for 2 s and for 6 s. Each time the fleet is within rho_c or holding, never reported past it
+falsely: the stall resumes where the UAVs stand, a UAV heard from late makes the formation
+hold, a lost link freezes it until the UAVs are back in guided flight on their targets, and
+the vehicle clock that slipped while stopped is re-anchored before its samples are judged.
+(The ground station stopped for 3 s: test_faults_e2e.py; in lockstep: test_lockstep_e2e.py.)
+`--link-wait 30`: a vehicle stopped 6 s is silent up to 12 mission seconds at speed-up 2,
+longer than the default wait, after which everyone would land (test_core.py)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+
+import pytest
+
+from gcs.flight.core import REJOIN_SETTLE_S
+from tests.flying import Flight, children_running, flight_speedup, mission_file
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
+
+SPEEDUP = flight_speedup(2)
+RHO_C = 5.0  # the small mission's safety margin
+#: (what, wall seconds stopped, a line that says the fleet flies on again afterwards)
+STOPS = (
+    ("gcs", 1.0, ("GCS scheduler stalled",)),
+    ("vehicles", 2.0, ("formation resumes", "(resume)")),
+    ("vehicles", 6.0, ("(resume)",)),
+)
+
+
+@pytest.fixture(scope="module")
+def stopped(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("stops")
+    mission = mission_file(folder)
+    flight = Flight(
+        ["-v", "mission", "run", str(mission), "--speedup", str(SPEEDUP),
+         "--vehicles-per-process", "4", "--no-lockstep", "--link-wait", "30", "--json"],
+        folder,
+    )  # fmt: skip
+    try:
+        seen = flight.wait_for("UAV 4: taking_off -> following", timeout=120)
+        for what, seconds, again in STOPS:
+            # the second process flies UAVs 3 and 4 (the leader, UAV 2, has one of its own)
+            pid = flight.pid if what == "gcs" else children_running(flight.pid, "vehicles sim")[-1]
+            os.kill(pid, signal.SIGSTOP)
+            time.sleep(seconds)  # the fault itself: the process stays stopped this long
+            os.kill(pid, signal.SIGCONT)
+            seen = flight.wait_for(again, timeout=120, start=seen + 1)
+        code, out, err = flight.finish(timeout=240)
+    finally:
+        flight.kill()
+    return {"code": code, "run": json.loads(out) if out.strip() else {}, "err": err}
+
+
+def test_the_fleet_stayed_within_rho_c_and_landed_on_its_slots(stopped):
+    run = stopped["run"]
+    assert run, stopped["err"][-3000:]
+    assert run["max_tracking_error_m"] < RHO_C, stopped["err"][-3000:]
+    kinds = {event["kind"] for event in run["events"]}
+    assert "tracking" not in kinds  # no breach reported, false or true
+    assert all(uav["phase"] == "landed" for uav in run["per_uav"])
+    assert all(uav["landing_error_m"] < 1.0 for uav in run["per_uav"])
+    # the 6 s stop silenced UAVs 3 and 4 past the link timeout: a true loss, reported
+    assert stopped["code"] == 1 and run["completed"] is False
+    assert "link lost" in run["reason"]
+    assert "GCS Failsafe" not in stopped["err"]
+
+
+def test_the_ground_station_stall_resumed_where_the_uavs_stood(stopped):
+    (stall,) = stopped["run"]["stalls"]
+    # the UAVs flew on along their last setpoints: the formation resumed there, never behind
+    assert stall["t"] <= stall["paused_s"] <= stall["resumed_s"]
+
+
+def test_uavs_heard_from_late_made_the_formation_hold(stopped):
+    holds = stopped["run"]["holds"]
+    late = [hold for hold in holds if "telemetry lags" in hold["reason"]]
+    assert late and all(set(hold["uavs"]) <= {3, 4} for hold in late)
+
+
+def test_after_a_lost_link_the_formation_waited_for_the_uavs_then_kept_its_lead(stopped):
+    run = stopped["run"]
+    backs = [e["t"] for e in run["events"] if e["kind"] == "link_back"]
+    resumes = [c for c in run["speed_changes"] if c["source"] == "resume"]
+    assert backs and len(resumes) >= 1
+    for change in resumes:
+        back = max(t for t in backs if t <= change["requested_s"])
+        assert change["requested_s"] >= back + REJOIN_SETTLE_S - 0.2
+        # the late acknowledgements of the stopped vehicles did not stretch the lead
+        assert change["effective_s"] - change["requested_s"] <= 1.0

@@ -95,6 +95,9 @@ DEFAULT_TRACKING_FRACTION = 0.3
 #: `gcs.footprints.MAX_FOOTPRINT_DISTANCE_M`, imported above.
 BACKENDS = ("sim", "ardupilot", "px4")
 PARKING = ("segment", "ray")
+#: `connectivity.rule`: the paper's disk (within radio_range), or also a chord clear of the
+#: buildings (line of sight, docs/line-of-sight.md).
+CONNECTIVITY_RULES = ("disk", "line_of_sight")
 #: `stations.order`: `tsp` (the planner picks the shortest tour) or `given` (as written).
 STATION_ORDERS = ("tsp", "given")
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")
@@ -303,6 +306,8 @@ class Mission:
     #: `stations.relieve_below_pct`: a UAV on station whose battery (%) is below it is
     #: relieved; None = never for its battery.
     relieve_below_pct: float | None = None
+    #: `connectivity.rule`: `disk` or `line_of_sight` (CONNECTIVITY_RULES).
+    connectivity_rule: str = "disk"
 
     @property
     def base_station_points(self) -> np.ndarray:
@@ -565,6 +570,7 @@ class MissionParser:
                 "version", "name", "origin", "start", "goal", "safety_margin", "radio_range",
                 "altitude", "parking", "speed", "fleet", "vehicle", "base_stations",
                 "obstacles", "ground_users", "sim", "radio", "signing", "stations", "return",
+                "connectivity",
             ),
             tuple(
                 key
@@ -592,6 +598,10 @@ class MissionParser:
             )
         altitude = self.positive(root["altitude"], "altitude", "m")
         parking = self.choice(root.get("parking", "segment"), "parking", PARKING)
+        connectivity = self.mapping(root.get("connectivity", {}), "connectivity", ("rule",))
+        rule = self.choice(
+            connectivity.get("rule", "disk"), "connectivity.rule", CONNECTIVITY_RULES
+        )
         vehicle = self.vehicle(root.get("vehicle", {}), safety_margin)
         speed = self.speed(root["speed"], vehicle)
         fleet = self.fleet(root.get("fleet", {}))
@@ -656,6 +666,7 @@ class MissionParser:
             station_order=order,
             return_at=return_at,
             relieve_below_pct=relieve_below_pct,
+            connectivity_rule=rule,
         )
 
     def name(self, value: Any) -> str:

@@ -23,6 +23,7 @@ import numpy as np
 
 from planner.guarantees import check_positions
 from planner.obstacles import Obstacles
+from planner.sight import Sight
 
 #: The plan flies at exactly rho_c from obstacles and 2 rho_c from other UAVs by design, so the
 #: flown distance hovers around those bounds: a "near" warning is raised when a bound is crossed
@@ -52,11 +53,16 @@ class SafetyStats:
     max_control_error_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     samples: int = 0
     connected_samples: int = 0
+    los_connected_samples: int = 0  # ... connected by line of sight (`planner.sight`)
     last_connected: bool | None = None  # at the last sample with every UAV known
 
     @property
     def connected_fraction(self) -> float | None:
         return self.connected_samples / self.samples if self.samples else None
+
+    @property
+    def los_connected_fraction(self) -> float | None:
+        return self.los_connected_samples / self.samples if self.samples else None
 
 
 class SafetyMonitor:
@@ -71,8 +77,10 @@ class SafetyMonitor:
         radio_range: float,
         safety_margin: float,
         vehicle_radius: float,
+        sight: Sight | None = None,
     ) -> None:
         self.fleet_size = fleet_size
+        self.sight = sight if sight is not None else Sight(obstacles)
         self.obstacles = obstacles
         self.base_stations = np.asarray(base_stations, float).reshape(-1, 2)
         self.radio_range = radio_range
@@ -147,6 +155,12 @@ class SafetyMonitor:
         if everyone:
             stats.samples += 1
             stats.connected_samples += int(sample.connected[0])
+            if sample.connected[0]:  # by line of sight too? (a subset of the links)
+                sight = check_positions(
+                    xy[None], Obstacles(), self.base_stations, self.radio_range,
+                    None if heights is None else heights[None], sight=self.sight,
+                )  # fmt: skip
+                stats.los_connected_samples += int(sight.connected[0])
             stats.last_connected = bool(sample.connected[0])
         events = []
         rho, radius = self.safety_margin, self.vehicle_radius

@@ -30,11 +30,14 @@ import numpy as np
 from gcs.errors import InputError, RowsRefused
 from gcs.mission import Mission, SpeedSchedule
 from planner.formation import (
+    DISTANCE_TOLERANCE,
     ParkingRows,
     collision_spacing,
     min_fleet_size,
     parking_rows,
+    radio_spacing,
 )
+from planner.guarantees import planned_connected_fraction
 from planner.kinematics import (
     LineFormation,
     SpeedProfile,
@@ -46,11 +49,53 @@ from planner.numbers import fmt_against, plural
 from planner.relief import ReliefRefused, relief_layout
 from planner.route import RoutePlan, RouteProblem, first_leg, plan_route
 from planner.search import SearchProgress, plan_path
+from planner.sight import Sight, chord_reach
 from planner.types import PathPlan, PathProblem
-from planner.validity import row_refusal
+from planner.validity import check_path, row_refusal
 
 #: Tolerance when comparing a requested speed with the safe speed, m/s.
 SPEED_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class Connectivity:
+    """How the plan stands under both connectivity rules (plan JSON `connectivity`): the
+    mission's `rule`; eq. 28's fleet size; the path's line-of-sight chord reach and the rigid
+    formation's fleet size at that spacing (`planner.sight.chord_reach`); the formation's
+    spacing dS; the share of the planned flight during which every UAV reaches a base
+    station by line of sight (`planner.guarantees.planned_connected_fraction`)."""
+
+    rule: str
+    eq28_fleet_size: int
+    los_reach_m: float
+    rigid_los_fleet_size: int | None  # None: no line-of-sight formation (reach <= dS_c)
+    spacing_m: float
+    los_connected_fraction: float
+
+    def to_json(self, fleet_size: int) -> dict[str, Any]:
+        return {
+            "rule": self.rule,
+            "fleet_size": fleet_size,
+            "eq28_fleet_size": self.eq28_fleet_size,
+            "rigid_los_fleet_size": self.rigid_los_fleet_size,
+            "los_reach_m": self.los_reach_m,
+            "spacing_m": self.spacing_m,
+            "los_connected_fraction": self.los_connected_fraction,
+        }
+
+    def warning(self) -> str | None:
+        """One line when a disk plan's links pass through buildings."""
+        if self.rule != "disk" or self.los_connected_fraction >= 1.0:
+            return None
+        need = (
+            f"`connectivity.rule: line_of_sight` needs {plural(self.rigid_los_fleet_size, 'UAV')}"
+            if self.rigid_los_fleet_size is not None
+            else "no line-of-sight formation exists on this path"
+        )
+        return (
+            f"connected by line of sight {100 * self.los_connected_fraction:.1f} % of the "
+            f"flight (radio links through buildings); {need}"
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,6 +119,7 @@ class MissionPlan:
     smoothing_error_m: float | None
     planning_time_s: float
     route: RoutePlan | None = None  # stations missions (DESIGN 7)
+    connectivity: Connectivity | None = None  # A -> B missions with a formation
 
     @property
     def valid(self) -> bool:
@@ -151,6 +197,13 @@ def plan_mission(
         return time_limit_s is not None and elapsed >= time_limit_s
 
     if mission.stations:
+        if mission.connectivity_rule != "disk":
+            raise InputError(
+                mission.source,
+                "connectivity.rule",
+                "disk with stations (line of sight is planned for A -> B missions so far), "
+                f"got {mission.connectivity_rule}",
+            )
         return _plan_stations(
             mission, cap_speed, conns, conn_key, method, gap_tolerance, progress, clock
         )
@@ -187,6 +240,12 @@ def plan_mission(
     size = int(path_plan.fleet_size)
     if fixed is not None:
         _check_fleet_size(mission, fixed, int(path_plan.min_fleet_size), "the planned path")
+    spacing = None
+    if mission.connectivity_rule == "line_of_sight":
+        path_plan, size, spacing = _sight_spacing(mission, problem, path_plan, fixed, progress)
+        if not path_plan.valid:
+            return _unflown(mission, path_plan, clock() - began)
+        invalid = replace(invalid, path_plan=path_plan)
     _check_fleet(mission, size, conns, conn_key)
 
     formation = LineFormation(
@@ -195,8 +254,111 @@ def plan_mission(
         safety_margin=mission.safety_margin,
         radio_range=mission.radio_range,
         rows=path_plan.rows,
+        spacing=spacing,
     )
-    return _flown(invalid, formation, cap_speed)
+    flown = _flown(invalid, formation, cap_speed)
+    return replace(flown, connectivity=_connectivity(mission, formation))
+
+
+#: Line of sight: the fleet is sized and the path planned again at most this many times
+#: (more UAVs lengthen the parking rows, whose chords may shorten the reach).
+SIGHT_ROUNDS = 4
+
+
+def _extended_path(formation: LineFormation) -> np.ndarray:
+    """The polyline the UAVs fly: the start row's far end, A ... B, the goal row's far end."""
+    row = (formation.fleet_size - 1) * formation.collision_spacing
+    directions = formation.segment_directions
+    path = formation.path
+    return np.vstack([path[0] - row * directions[0], path, path[-1] + row * directions[-1]])
+
+
+def _sight_reach(mission: Mission, formation: LineFormation) -> float:
+    """The formation path's line-of-sight chord reach, at most dS_r."""
+    limit = radio_spacing(mission.safety_margin, mission.radio_range)
+    return chord_reach(_extended_path(formation), Sight(mission.obstacles), limit)
+
+
+def _sight_spacing(
+    mission: Mission,
+    problem: PathProblem,
+    path_plan: PathPlan,
+    fixed: int | None,
+    progress: Callable[[SearchProgress], bool],
+) -> tuple[PathPlan, int, float | None]:
+    """`connectivity.rule: line_of_sight` (rigid formation): the spacing dS is the path's
+    chord reach (every chord between two UAVs at most dS apart along the path is clear), and
+    the fleet eq. 28 with dS: (path plan, fleet size, spacing, None when dS_r itself is
+    clear). Refused (InputError) when the reach is not above dS_c, or a fixed fleet is too
+    small."""
+    size = int(path_plan.fleet_size) if fixed is None else fixed
+    spacing_c = collision_spacing(mission.safety_margin)
+    spacing_r = radio_spacing(mission.safety_margin, mission.radio_range)
+    for _ in range(SIGHT_ROUNDS):
+        disk = LineFormation(
+            path=path_plan.path,
+            fleet_size=size,
+            safety_margin=mission.safety_margin,
+            radio_range=mission.radio_range,
+            rows=path_plan.rows,
+        )
+        reach = _sight_reach(mission, disk)
+        if reach <= spacing_c + DISTANCE_TOLERANCE:
+            raise InputError(
+                mission.source,
+                "connectivity.rule",
+                f"disk for this path: its chords stay clear of the buildings only "
+                f"{reach:g} m apart along it, not above the parking spacing dS_c = "
+                f"{spacing_c:.3g} m, so no line-of-sight formation exists",
+            )
+        spacing = min(reach, spacing_r)
+        need = max(1, math.ceil(disk.path_length / spacing - DISTANCE_TOLERANCE))
+        if need <= size:
+            return path_plan, size, spacing if spacing < spacing_r else None
+        if fixed is not None:
+            raise InputError(
+                mission.source,
+                "fleet.size",
+                f"auto or at least {plural(need, 'UAV')} for line of sight (the path's chords "
+                f"are clear {spacing:g} m apart along it; eq. 28 needs "
+                f"{plural(int(path_plan.min_fleet_size), 'UAV')}), got {fixed}",
+            )
+        size = need
+        grown = problem.rows(size)
+        if row_refusal(problem, grown) is None and check_path(path_plan.path, problem, grown).ok:
+            # longer rows only remove edges: a path still valid with them is still shortest
+            path_plan = replace(path_plan, fleet_size=size, rows=grown)
+            continue
+        path_plan = plan_path(replace(problem, fleet_size=size), progress)
+        if not path_plan.valid:
+            return path_plan, size, None
+    raise InputError(
+        mission.source,
+        "connectivity.rule",
+        f"disk for this path: the line-of-sight fleet kept growing with its parking rows "
+        f"for {SIGHT_ROUNDS} rounds",
+    )
+
+
+def _connectivity(mission: Mission, formation: LineFormation) -> Connectivity:
+    reach = _sight_reach(mission, formation)
+    spacing_c = collision_spacing(mission.safety_margin)
+    rigid = None
+    if reach > spacing_c + DISTANCE_TOLERANCE:
+        rigid = max(1, math.ceil(formation.path_length / reach - DISTANCE_TOLERANCE))
+    sight = Sight(mission.obstacles)
+    return Connectivity(
+        rule=mission.connectivity_rule,
+        eq28_fleet_size=min_fleet_size(
+            formation.path_length, mission.safety_margin, mission.radio_range
+        ),
+        los_reach_m=reach,
+        rigid_los_fleet_size=rigid,
+        spacing_m=formation.radio_spacing,
+        los_connected_fraction=planned_connected_fraction(
+            formation, mission.base_station_points, mission.radio_range, sight
+        ),
+    )
 
 
 def _unflown(
@@ -403,6 +565,8 @@ def plan_json(plan: MissionPlan) -> dict[str, Any]:
         "altitude_m": mission.altitude,
         "origin": {"lat": mission.origin.lat, "lon": mission.origin.lon, "alt": mission.origin.alt},
     }
+    if plan.connectivity is not None:
+        out["connectivity"] = plan.connectivity.to_json(plan.fleet_size)
     from gcs.footprints import map_json  # the footprint files' reports (docs/outputs.md)
 
     out["map"] = map_json(mission.footprints)

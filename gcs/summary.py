@@ -48,6 +48,7 @@ def run_json(result: RunResult, log_path: str, safety_margin: float) -> dict[str
         "min_uav_obstacle_m": _num(result.min_uav_obstacle_m),
         "max_tracking_error_m": _num(result.max_tracking_error_m),
         "connected_fraction": _num(result.connected_fraction),
+        "los_connected_fraction": _num(result.los_connected_fraction),
         "speed_changes": result.speed_changes,
         "log": log_path,
         "exit_status": exit_status(result),
@@ -123,7 +124,13 @@ def summary_renderable(result: RunResult, log_path: str, safety_margin: float) -
         _fmt(result.max_tracking_error_m, "m") + f" (must stay < rho_c = {safety_margin:g} m)",
     )
     connected = result.connected_fraction
-    top.add_row("connected", "n/a" if connected is None else f"{100 * connected:.1f} % of samples")
+    sight = result.los_connected_fraction
+    top.add_row(
+        "connected",
+        "n/a"
+        if connected is None
+        else f"{100 * connected:.1f} % of samples, {100 * sight:.1f} % by line of sight",
+    )
     stations = result.stations
     if stations is not None:
         back, held = stations.return_s, stations.held_connected_fraction

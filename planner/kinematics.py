@@ -234,6 +234,10 @@ class LineFormation:
     rows: ParkingRows
     stations: np.ndarray | None = None  # (N,) s_n, metres beyond A along the path
     return_distance: float | None = None  # with stations: V_n(S) = V_n(2 M - S) for S >= M
+    #: dS of eq. 27, the spacing of flying UAVs along the path: dS_r = rho_R - 2 rho_c unless
+    #: given (line of sight: the path's chord reach, `planner.sight.chord_reach`), in
+    #: (dS_c, dS_r].
+    spacing: float | None = None
 
     def __post_init__(self) -> None:
         path = np.array(self.path, dtype=float)
@@ -266,6 +270,12 @@ class LineFormation:
         directions = np.concatenate([e0[None], steps / lengths[:, None], ek[None]])
         spacing_c = collision_spacing(self.safety_margin)
         spacing_r = radio_spacing(self.safety_margin, self.radio_range)
+        if self.spacing is not None:
+            if not spacing_c + DISTANCE_TOLERANCE < self.spacing <= spacing_r + DISTANCE_TOLERANCE:
+                raise ValueError(
+                    "LineFormation: spacing must be above dS_c and at most dS_r = rho_R - 2 rho_c"
+                )
+            spacing_r = float(self.spacing)
         rank = np.arange(fleet_size, dtype=float)  # n - 1
         count = len(path)
         thresholds = np.empty((fleet_size, count + 2))
@@ -396,7 +406,7 @@ class LineFormation:
 
     @property
     def radio_spacing(self) -> float:
-        """dS_r (eq. 23)."""
+        """dS_r (eq. 23), or the `spacing` given instead (line of sight)."""
         return self._spacing_r
 
     @property

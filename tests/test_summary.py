@@ -28,6 +28,7 @@ def _result(tracking_error: float | None) -> RunResult:
         control_error_m=[None, None],
         landing_error_m=[None, None],
         connected_fraction=1.0,
+        los_connected_fraction=0.5,
         speed_changes=[],
         events=[],
         phases=["landed", "landed"],
@@ -95,7 +96,7 @@ def test_within_budget_every_line_is_what_it_always_was():
         "min UAV-UAV": "13.63 m (at least 2 rho_c - 2 x tracking error = 5.28 m by design)",
         "min UAV-obstacle": "4.45 m (at least rho_c - tracking error = 2.64 m by design)",
         "max tracking error": "2.36 m (must stay < rho_c = 5 m)",
-        "connected": "100.0 % of samples",
+        "connected": "100.0 % of samples, 50.0 % by line of sight",
         "setpoints": "0 sent, n/a mission-time rate, p99 period jitter n/a, longest gap n/a"
         " (period 20.0 ms wall)",
         "log": "x.mcap",

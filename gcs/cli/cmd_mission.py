@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import logging
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -195,6 +196,9 @@ def plan_with_args(mission: Mission, args: argparse.Namespace) -> MissionPlan:
             f"the plan needs {size}",
         )
     getattr(args, "release_warnings", lambda: None)()  # the input is accepted
+    warning = plan.connectivity.warning() if plan.connectivity is not None else None
+    if warning is not None:
+        logging.getLogger("gcs.connectivity").warning("%s: %s", mission.source, warning)
     return plan
 
 

@@ -265,6 +265,8 @@ class RunResult:
     landing_error_m: list[float | None]
     connected_fraction: float | None
     speed_changes: list[dict]
+    #: ... by line of sight: every hop's chord clear of the buildings (docs/outputs.md)
+    los_connected_fraction: float | None
     events: list[MonitorEvent]
     phases: list[str]
     smoothing_window_s: float
@@ -2021,6 +2023,7 @@ class GroundStation:
             else [None] * self.size,
             landing_error_m=landing_error,
             connected_fraction=stats.connected_fraction,
+            los_connected_fraction=stats.los_connected_fraction,
             speed_changes=self.speeds.as_json(),
             events=list(self.events),
             phases=[d.phase.value for d in self.drivers],

@@ -262,6 +262,7 @@ def _formation(plan: dict, returned: dict | None = None) -> LineFormation | None
             radio_range=float(plan["radio_range_m"]),
             rows=rows,
             stations=stations,
+            spacing=(plan.get("connectivity") or {}).get("spacing_m"),
         )
         if stations is not None and returned is not None:
             formation = formation.with_return(float(returned["distance"]))

@@ -178,6 +178,7 @@ def with_fleet_size(plan: MissionPlan, fleet_size: int) -> MissionPlan:
             safety_margin=formation.safety_margin,
             radio_range=formation.radio_range,
             rows=formation.rows,
+            spacing=formation.spacing,
         ),
     )
 

@@ -1,0 +1,144 @@
+"""The faults of issue 32, flown again (`python -m bench faults`, about 8 minutes): the small
+mission (examples/small.yaml, 4 UAVs, rho_c 5 m) with real `gcs` and `vehicles` processes
+over loopback UDP, one fault per flight, on the wall clock (`--no-lockstep`, as with real
+autopilots) unless said. Columns: the outcome (exit status, completed or the reason), the
+largest tracking error, where the UAVs ended (landed, and how far from their goal slots at
+most), and the state of the log. A last row flips one byte of a recording and asks
+`gcs log info`."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from tests.flying import Flight, children_running, environment, mission_file, udp_ports
+
+FOLLOWING = "UAV 4: taking_off -> following"
+
+
+def _stop(pid: int, seconds: float) -> None:
+    os.kill(pid, signal.SIGSTOP)
+    time.sleep(seconds)  # the fault itself
+    os.kill(pid, signal.SIGCONT)
+
+
+def _gcs_stopped(seconds: float):
+    return lambda flight, folder: _stop(flight.pid, seconds)
+
+
+def _vehicles_stopped(seconds: float):
+    def fault(flight, folder):
+        _stop(children_running(flight.pid, "vehicles sim")[-1], seconds)
+
+    return fault
+
+
+def _forged_land(flight, folder) -> None:
+    """Unsigned LAND heartbeats, positions 200 m off and NaN from each UAV's system id, to
+    every ground-station port (what an attacker on the host or the network sends)."""
+    subprocess.run(
+        [sys.executable, "-m", "tests.attacker", "--vehicles", "",
+         "--gcs", ",".join(map(str, udp_ports(flight.pid))), "--rounds", "40",
+         "--period", "0.05", "--sniff", str(folder / "f.mcap")],
+        capture_output=True, env=environment(), timeout=60, check=True,
+    )  # fmt: skip
+
+
+#: (name, speed-up, extra flags, fault applied once every UAV follows, or None)
+CASES = (
+    ("the log on a full disk (/dev/full)", 2.0, ("--full-disk",), None),
+    ("forged LAND heartbeats at the GCS ports (--insecure)", 2.0, ("--insecure",), _forged_land),
+    ("gcs stopped 3 s, 2x", 2.0, (), _gcs_stopped(3.0)),
+    ("gcs stopped 3 s, 1x", 1.0, (), _gcs_stopped(3.0)),
+    ("a vehicle process stopped 2 s, 2x", 2.0, (), _vehicles_stopped(2.0)),
+    ("a vehicle process stopped 6 s, 2x", 2.0, (), _vehicles_stopped(6.0)),
+    ("a vehicle process stopped 6 s, 2x, --link-wait 30", 2.0, ("--link-wait", "30"),
+     _vehicles_stopped(6.0)),
+)  # fmt: skip
+
+
+def fly(folder: Path, speedup: float, extra: tuple[str, ...], fault) -> dict:
+    mission = mission_file(folder)
+    log = folder / "f.mcap"
+    log.unlink(missing_ok=True)
+    if "--full-disk" in extra:
+        log.symlink_to("/dev/full")
+        extra = tuple(e for e in extra if e != "--full-disk")
+    flight = Flight(
+        ["-v", "mission", "run", str(mission), "--speedup", f"{speedup:g}", "--no-lockstep",
+         "--vehicles-per-process", "4", "--json", "--force", "--log", str(log), *extra],
+        folder,
+    )  # fmt: skip
+    try:
+        if fault is not None:
+            flight.wait_for(FOLLOWING, timeout=120)
+            fault(flight, folder)
+        code, out, err = flight.finish(timeout=600)
+    finally:
+        flight.kill()
+    run = json.loads(out) if out.strip() else {}
+    return {**run, "exit": code, "log_path": log}
+
+
+def row(name: str, run: dict) -> list[str]:
+    outcome = "completed" if run.get("completed") else str(run.get("reason"))
+    error = run.get("max_tracking_error_m")
+    uavs = run.get("per_uav", [])
+    landed = sum(u["phase"] == "landed" for u in uavs)
+    off = max((u["landing_error_m"] or 0.0 for u in uavs), default=float("nan"))
+    recording = run.get("recording", {})
+    if recording.get("ok", True):
+        log = "complete"
+    else:
+        log = f"stopped: {recording.get('error', '')[:40]}"
+    return [
+        name,
+        str(run["exit"]),
+        outcome[:70],
+        "n/a" if error is None else f"{error:.2f}",
+        f"{landed}/{len(uavs)} landed, {off:.2f} m from slots",
+        log,
+    ]
+
+
+def flipped_byte(recording: Path) -> list[str]:
+    data = bytearray(recording.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    damaged = recording.with_name("flipped.mcap")
+    damaged.write_bytes(bytes(data))
+    info = subprocess.run(
+        [sys.executable, "-m", "gcs", "log", "info", str(damaged), "--json"],
+        capture_output=True, text=True, env=environment(), timeout=60,
+    )  # fmt: skip
+    report = json.loads(info.stdout) if info.stdout.strip() else {}
+    said = f"damaged: {report.get('damaged')}" if report else info.stderr.strip()[:60]
+    return ["one byte flipped in a recording", str(info.returncode), said, "-", "-", "-"]
+
+
+def main(cases=CASES) -> None:
+    table = Table(title="faults on the small mission (rho_c 5 m)")
+    for name in ("fault", "exit", "outcome", "max tracking m", "UAVs", "log"):
+        table.add_column(name)
+    with tempfile.TemporaryDirectory() as folder:
+        kept = None
+        for name, speedup, extra, fault in cases:
+            run = fly(Path(folder), speedup, extra, fault)
+            table.add_row(*row(name, run))
+            if run.get("recording", {}).get("ok", True) and run["log_path"].is_file():
+                kept = run["log_path"].rename(Path(folder) / "kept.mcap")
+        if kept is not None:
+            table.add_row(*flipped_byte(kept))
+    Console(width=220).print(table)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,130 @@
+"""Line of sight between nodes through a city (docs/line-of-sight.md).
+
+A radio link needs the two nodes within range *and* the chord between them clear of the
+buildings: at 2.4 GHz a wall costs tens of dB, so a link through a footprint is cut. `Sight`
+answers, vectorised over many node pairs, whether each chord is clear:
+
+* in 2-D (`clear`): the chord meets no obstacle (touching counts as meeting: a chord that
+  grazes a corner has its Fresnel zone in the wall), and keeps `margin` from every one when
+  asked (a margin of rho_c makes the chord between two *targets* stand for every chord between
+  UAVs within rho_c of them: such a chord lies within rho_c of the target chord);
+* in 3-D (`clear_3d`): a footprint with a known roof height blocks the chord only where the
+  chord passes below that height (the chord's height is linear along it, so its lowest point
+  over the footprint is where it enters or leaves it); footprints without a height and walls
+  block at every height.
+
+Pure: numbers in, booleans out; the obstacles' STRtree and prepared geometry do the geometry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from planner.obstacles import Obstacles
+
+
+@dataclass(frozen=True, eq=False)
+class Sight:
+    """What blocks radio: `obstacles` (solid polygons and walls), and `heights` (one per
+    polygon, metres above the local frame's origin; inf: blocks at every height). Without
+    heights every polygon blocks at every height."""
+
+    obstacles: Obstacles
+    heights: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.heights is not None:
+            heights = np.asarray(self.heights, float).reshape(-1)
+            if len(heights) != len(self.obstacles.polygons):
+                raise ValueError("Sight: one height per polygon")
+            object.__setattr__(self, "heights", heights)
+
+    def clear(self, starts: np.ndarray, ends: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """Whether each chord starts[i] -> ends[i] ((..., 2), horizontal) meets no obstacle
+        and keeps more than `margin` from every one (`margin` 0: touching blocks)."""
+        starts = np.asarray(starts, float)
+        ends = np.asarray(ends, float)
+        segments = np.stack([starts[..., :2], ends[..., :2]], axis=-2)
+        if len(self.obstacles) == 0:
+            return np.ones(segments.shape[:-2], bool)
+        return ~self.obstacles.segments_within(segments, margin)
+
+    def clear_3d(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """Whether each chord starts[i] -> ends[i] ((n, 3): x, y, height) passes no obstacle
+        below its height: a polygon with a finite height blocks the chord only where the
+        chord runs below that height over it; walls and polygons without one block it."""
+        starts = np.asarray(starts, float).reshape(-1, 3)
+        ends = np.asarray(ends, float).reshape(-1, 3)
+        clear = np.ones(len(starts), bool)
+        if len(starts) == 0 or len(self.obstacles) == 0:
+            return clear
+        lines = shapely.linestrings(np.stack([starts[:, :2], ends[:, :2]], axis=1))
+        chord, obstacle = self.obstacles.pairs_within(lines, 0.0)
+        polygons = len(self.obstacles.polygons)
+        roof = np.full(len(obstacle), np.inf)
+        if self.heights is not None:
+            is_polygon = obstacle < polygons
+            roof[is_polygon] = self.heights[obstacle[is_polygon]]
+        tall = ~np.isfinite(roof)
+        clear[chord[tall]] = False
+        low = np.flatnonzero(~tall & clear[chord])
+        if len(low) == 0:
+            return clear
+        chord, obstacle, roof = chord[low], obstacle[low], roof[low]
+        # the chord's lowest point over the footprint is where it crosses the outline or an
+        # end of it inside (its height is linear): line-line crossings, robust where an
+        # intersection with an invalid outline is not
+        geometries = self.obstacles.geometries[obstacle]
+        crossings = shapely.intersection(lines[chord], shapely.boundary(geometries))
+        xy, owner = shapely.get_coordinates(crossings, return_index=True)
+        for end in (starts, ends):
+            inside = shapely.intersects_xy(geometries, end[chord, 0], end[chord, 1])
+            xy = np.concatenate([xy, end[chord[inside], :2]])
+            owner = np.concatenate([owner, np.flatnonzero(inside)])
+        a, b = starts[chord[owner]], ends[chord[owner]]
+        along = b[:, :2] - a[:, :2]
+        length2 = np.einsum("ij,ij->i", along, along)
+        fraction = np.where(
+            length2 > 0.0,
+            np.einsum("ij,ij->i", xy - a[:, :2], along) / np.where(length2 > 0, length2, 1.0),
+            0.0,
+        ).clip(0.0, 1.0)
+        height = a[:, 2] + fraction * (b[:, 2] - a[:, 2])
+        lowest = np.full(len(chord), np.inf)
+        np.minimum.at(lowest, owner, height)
+        clear[chord[lowest < roof]] = False
+        return clear
+
+
+#: Arc-length step (m) of the samples `chord_reach` tests along a path.
+REACH_STEP_M = 1.0
+
+
+def chord_reach(
+    polyline: np.ndarray, sight: Sight, limit: float, step: float = REACH_STEP_M
+) -> float:
+    """The path's line-of-sight reach: the largest d <= `limit` such that every chord between
+    two points of `polyline` ((K, 2), followed along its arcs) at most d apart along it is
+    clear (the rigid formation's spacing under line of sight, docs/line-of-sight.md).
+
+    Sampled, and sound: points are taken every `step` of arc length and every pair of them at
+    most G steps apart is tested with a margin of step / 2. Any chord between two points at
+    most (G - 1) step apart lies within step / 2 of a tested one (each end is within step / 2
+    of a sample, and a chord is convex in its ends), so it is clear when the tested one keeps
+    that margin: the reach returned is (G - 1) step for the first G with a blocked pair."""
+    points = np.asarray(polyline, float).reshape(-1, 2)
+    pieces = np.diff(points, axis=0)
+    lengths = np.hypot(pieces[:, 0], pieces[:, 1])
+    arcs = np.concatenate([[0.0], np.cumsum(lengths)])
+    grid = np.append(np.arange(0.0, arcs[-1], step), arcs[-1])
+    samples = np.column_stack(
+        [np.interp(grid, arcs, points[:, 0]), np.interp(grid, arcs, points[:, 1])]
+    )
+    most = int(np.ceil(limit / step)) + 1
+    for gap in range(1, min(most, len(samples) - 1) + 1):
+        if not np.all(sight.clear(samples[:-gap], samples[gap:], step / 2.0)):
+            return max((gap - 2) * step, 0.0)
+    return float(limit)

@@ -1,0 +1,140 @@
+"""Connectivity by line of sight (docs/line-of-sight.md): every plan
+says how it stands under both rules (plan JSON `connectivity`, one warning line for a disk plan
+whose links pass through buildings); `connectivity.rule: line_of_sight` plans the rigid
+formation whose spacing is the path's chord reach, and every sampled instant of it is
+connected by line of sight, checked by brute force (shapely and networkx, none of the code
+under test) on the examples, random buildings and a city grid; it is flown so in the fast
+mode; a fleet too small for it, or a stations mission, is refused with one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from gcs.mission import load_mission
+from gcs.planning import plan_json, plan_mission
+from gcs.sim.fastsim import FastOptions, fly_fast
+from planner.scenarios import city_grid, random_buildings
+from tests.test_sight import brute_connected
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def with_rule(folder: Path, source: Path, rule: str = "line_of_sight", **changes) -> Path:
+    data = yaml.safe_load(source.read_text())
+    data["connectivity"] = {"rule": rule}
+    data.update(changes)
+    path = folder / source.name
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    for footprints in source.parent.glob("*.geojson"):  # relative to the mission file
+        (folder / footprints.name).write_bytes(footprints.read_bytes())
+    return path
+
+
+def scenario_mission(folder: Path, scenario) -> Path:
+    """A mission file of a planner scenario (rectangles), line of sight, speed capped."""
+    data = {
+        "version": 1,
+        "name": scenario.name,
+        "start": {"x": float(scenario.start[0]), "y": float(scenario.start[1]), "theta_deg": 0},
+        "goal": {"x": float(scenario.goal[0]), "y": float(scenario.goal[1]), "theta_deg": 0},
+        "safety_margin": scenario.safety_margin,
+        "radio_range": 120.0,
+        "altitude": 20,
+        "speed": {"max": 8, "cap_to_safe": True},
+        "connectivity": {"rule": "line_of_sight"},
+        "obstacles": [
+            {"rectangle": {"center": [float(r[0]), float(r[1])], "size": [float(r[2]), float(r[3])],
+                           "angle_deg": float(r[4])}}
+            for r in scenario.rectangles
+        ],
+    }  # fmt: skip
+    path = folder / f"{scenario.name}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def assert_connected_by_sight(plan, samples: int = 150) -> None:
+    mission, formation = plan.mission, plan.formation
+    polygons = list(mission.obstacles.polygons)
+    walls = mission.obstacles.walls
+    stations = mission.base_station_points
+    for distance in np.linspace(0.0, formation.total_distance, samples):
+        xy = formation.positions(np.array([distance]))[0]
+        assert brute_connected(xy, stations, polygons, walls, mission.radio_range), distance
+
+
+def test_a_disk_plan_says_how_often_its_links_pass_through_buildings(gcs_main, caplog):
+    path = EXAMPLES / "city-blocks.yaml"
+    result = gcs_main("mission", "plan", path, "--json")
+    assert result.returncode == 0
+    connectivity = json.loads(result.stdout)["connectivity"]
+    assert connectivity["rule"] == "disk" and connectivity["fleet_size"] == 8
+    assert connectivity["eq28_fleet_size"] == 8
+    assert 0.1 < connectivity["los_connected_fraction"] < 0.2  # 14.5 % measured by hand
+    assert connectivity["rigid_los_fleet_size"] > 40  # the rigid baseline: 55 by hand
+    warnings = [r.getMessage() for r in caplog.records if r.name == "gcs.connectivity"]
+    assert len(warnings) == 1
+    assert "connected by line of sight 14." in warnings[0]
+    assert f"needs {connectivity['rigid_los_fleet_size']} UAVs" in warnings[0]
+
+
+def test_the_line_of_sight_plan_of_the_small_mission_is_connected_at_every_instant(tmp_path):
+    plan = plan_mission(load_mission(with_rule(tmp_path, EXAMPLES / "small.yaml")))
+    disk = plan_mission(load_mission(EXAMPLES / "small.yaml"))
+    assert plan.valid and plan.fleet_size > disk.fleet_size
+    data = plan_json(plan)["connectivity"]
+    assert data["rule"] == "line_of_sight" and data["los_connected_fraction"] == 1.0
+    assert data["fleet_size"] == data["rigid_los_fleet_size"] == plan.fleet_size
+    assert plan.formation.radio_spacing == pytest.approx(data["los_reach_m"])
+    assert_connected_by_sight(plan)
+    # the disk plan is not: the brute force finds an instant cut off by a building
+    with pytest.raises(AssertionError):
+        assert_connected_by_sight(disk)
+
+
+@pytest.mark.parametrize(
+    "scenario",
+    [random_buildings(12, seed=3, size=500.0), random_buildings(25, seed=8, size=700.0),
+     city_grid(4, 3)],
+    ids=lambda s: s.name,
+)  # fmt: skip
+def test_line_of_sight_plans_of_random_and_grid_maps_are_connected_by_sight(tmp_path, scenario):
+    plan = plan_mission(load_mission(scenario_mission(tmp_path, scenario)))
+    assert plan.valid, plan.reason
+    assert_connected_by_sight(plan)
+
+
+def test_flown_in_the_fast_mode_the_line_of_sight_plan_stays_connected_by_sight(tmp_path):
+    disk = fly_fast(plan_mission(load_mission(EXAMPLES / "small.yaml")), FastOptions())
+    sight = fly_fast(
+        plan_mission(load_mission(with_rule(tmp_path, EXAMPLES / "small.yaml"))), FastOptions()
+    )
+    assert disk.run_json["connected_fraction"] == sight.run_json["connected_fraction"] == 1.0
+    assert disk.run_json["los_connected_fraction"] < 0.95
+    assert sight.run_json["los_connected_fraction"] == 1.0
+    assert sight.run_json["completed"] and sight.run_json["max_tracking_error_m"] < 5.0
+
+
+def test_a_fixed_fleet_too_small_for_line_of_sight_is_refused_with_the_number(tmp_path, gcs_main):
+    path = with_rule(tmp_path, EXAMPLES / "table-ii.yaml")  # fleet.size: 9
+    result = gcs_main("mission", "check", path)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1
+    assert "fleet.size" in result.stderr and "for line of sight" in result.stderr
+    assert "at least 56 UAVs" in result.stderr
+
+
+def test_a_stations_mission_with_line_of_sight_is_refused(tmp_path, gcs_main):
+    result = gcs_main("mission", "check", with_rule(tmp_path, EXAMPLES / "stations.yaml"))
+    assert result.returncode == 2 and "connectivity.rule" in result.stderr
+    assert "A -> B missions" in result.stderr
+
+
+def test_an_unknown_rule_is_refused(tmp_path, gcs_main):
+    result = gcs_main("mission", "check", with_rule(tmp_path, EXAMPLES / "small.yaml", "sight"))
+    assert result.returncode == 2 and result.stderr.count("\n") == 1
+    assert "connectivity.rule" in result.stderr and "line_of_sight" in result.stderr

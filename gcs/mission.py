@@ -259,6 +259,8 @@ class Radio:
     loss: float = 0.0
     model: str = "simple"
     calibration: Path | None = None
+    #: links whose chord meets an obstacle are cut (docs/line-of-sight.md)
+    buildings: bool = False
 
 
 @dataclass(frozen=True)
@@ -992,7 +994,7 @@ class MissionParser:
         m = self.mapping(
             value,
             "radio",
-            ("enabled", "hop_latency_ms", "jitter_ms", "loss", "model", "calibration"),
+            ("enabled", "hop_latency_ms", "jitter_ms", "loss", "model", "calibration", "buildings"),
         )
         d = Radio()
         model = self.choice(m.get("model", d.model), "radio.model", RADIO_MODELS)
@@ -1007,6 +1009,7 @@ class MissionParser:
             ),
             model=model,
             calibration=self.calibration(m["calibration"], model) if "calibration" in m else None,
+            buildings=self.boolean(m.get("buildings", d.buildings), "radio.buildings"),
         )
 
     def calibration(self, value: Any, model: str) -> Path:

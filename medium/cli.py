@@ -24,6 +24,7 @@ import socket
 import sys
 from collections.abc import Sequence
 
+from fleetwire.files import FOOTPRINT_BYTES, FileRefused, read_text_bounded
 from fleetwire.worldclock import WorldClockError
 from medium.calibration import DEFAULT_CALIBRATION, CalibrationTable, load_calibration
 from medium.ground_users import DEFAULT_PACKET_BYTES, DEFAULT_RATE_BPS, GroundUser
@@ -80,6 +81,20 @@ def _ground_users(text: str) -> list[GroundUser]:
     return users
 
 
+def _buildings(path: str | None):
+    """The obstacles of `--buildings` (`planner.sight.sight_json`'s file), or None."""
+    if path is None:
+        return None
+    from planner.sight import sight_from_json
+
+    try:
+        return sight_from_json(json.loads(read_text_bounded(path, FOOTPRINT_BYTES)))
+    except (OSError, UnicodeDecodeError, FileRefused, ValueError) as exc:
+        raise InputError(
+            f"--buildings: expected a buildings file of the ground station: {path}: {exc}"
+        ) from None
+
+
 def _calibration(model: str, path: str | None) -> CalibrationTable | None:
     """The table of `--model calibrated` (`--calibration`, default the shipped one)."""
     if model != "calibrated":
@@ -118,6 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="simple: the per-hop latency, jitter and loss; calibrated: the ns-3 table")  # fmt: skip
     add("--calibration", metavar="FILE",
         help="the table of --model calibrated (default: medium/calibration_ns3.json)")  # fmt: skip
+    add("--buildings", metavar="FILE",
+        help="links whose chord meets one of these obstacles are cut (JSON: polygons, walls)")  # fmt: skip
     add("--speedup", type=_positive("--speedup"), default=1.0)
     add("--home", type=_home, default=DEFAULT_ORIGIN, help="LAT,LON,ALT of local (0,0,0)")
     add("--ground-users", default="", help="'x,y[,rate_bps];...'")
@@ -162,6 +179,7 @@ def config_from_args(args: argparse.Namespace) -> MediumConfig:
             seed=args.seed,
             model=args.model,
             calibration=_calibration(args.model, args.calibration),
+            sight=_buildings(args.buildings),
         ),
         stations=tuple(stations),
         uavs=uavs,

@@ -185,7 +185,11 @@ class MediumModel:
         """The radio graph at `sim_s` (reused for _TOPOLOGY_MAX_AGE_S if nothing moved)."""
         if self._topology is None or abs(sim_s - self._topology_time) > _TOPOLOGY_MAX_AGE_S:
             self._topology = topology(
-                self.stations, self.positions_at(sim_s), self.radio.range_m, self._last_topology
+                self.stations,
+                self.positions_at(sim_s),
+                self.radio.range_m,
+                self._last_topology,
+                self.radio.sight,
             )
             self._last_topology = self._topology
             self._topology_time = sim_s

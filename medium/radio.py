@@ -31,7 +31,7 @@ import math
 from collections.abc import Hashable
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -42,6 +42,13 @@ MODELS = ("simple", "calibrated")
 #: Distances equal to the range count as links (the planner's tolerance, 1e-6 m).
 DISTANCE_TOLERANCE = 1e-6
 _NO_RELAY = np.iinfo(int).max  # a ground node no connected UAV hears
+
+
+class LineOfSight(Protocol):
+    """What blocks radio (`planner.sight.Sight`): whether each chord starts[i] -> ends[i]
+    ((n, 2) each) is clear of every building."""
+
+    def clear(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
@@ -60,6 +67,8 @@ class RadioConfig:
     model: str = "simple"
     calibration: CalibrationTable | None = None
     offered_load_bps: float | None = None
+    #: buildings: a link whose chord meets one is cut (None: the paper's disk, through walls)
+    sight: LineOfSight | None = None
 
     def __post_init__(self) -> None:
         if not self.range_m > 0:
@@ -94,6 +103,7 @@ class Topology:
     range_m: float
     hops: np.ndarray  # (N,) int
     hears: np.ndarray  # (N, B + N) bool; the UAV block is symmetric, False on its diagonal
+    sight: LineOfSight | None = None  # buildings: in range and a clear chord
 
     @property
     def hears_station(self) -> np.ndarray:
@@ -134,9 +144,9 @@ class Topology:
             return out
         station_count = len(self.stations)
         # (M, B + N): the stations, then the UAVs, each ground node is in range of
-        hears = _squared(points, np.concatenate([self.stations, self.uav_xy])) <= _limit(
-            self.range_m
-        )
+        nodes = np.concatenate([self.stations, self.uav_xy])
+        hears = _squared(points, nodes) <= _limit(self.range_m)
+        _cut_through_buildings(hears, points, nodes, self.sight)
         out[np.logical_or.reduce(hears[:, :station_count], axis=1)] = 1
         if len(self.uav_xy):
             relay = np.where(hears[:, station_count:] & (self.hops >= 0), self.hops, _NO_RELAY)
@@ -155,13 +165,31 @@ def _squared(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ijd,ijd->ij", gap, gap)
 
 
+def _cut_through_buildings(
+    hears: np.ndarray, points: np.ndarray, nodes: np.ndarray, sight: LineOfSight | None
+) -> None:
+    """`hears` (len(points), len(nodes)) without the pairs whose chord meets a building."""
+    if sight is None:
+        return
+    row, col = np.nonzero(hears)
+    known = np.isfinite(points[row]).all(axis=1) & np.isfinite(nodes[col]).all(axis=1)
+    row, col = row[known], col[known]
+    blocked = ~sight.clear(points[row], nodes[col])
+    hears[row[blocked], col[blocked]] = False
+
+
 def topology(
-    stations: np.ndarray, uav_xy: np.ndarray, range_m: float, previous: Topology | None = None
+    stations: np.ndarray,
+    uav_xy: np.ndarray,
+    range_m: float,
+    previous: Topology | None = None,
+    sight: LineOfSight | None = None,
 ) -> Topology:
     """The unit-disk graph of base stations and UAVs (horizontal positions, (B, 2) and (N, 2));
-    hop counts by a breadth-first search from every station at once (vectorised). When the
-    nodes in range are those of `previous` (the same stations and range a moment before: the
-    graph seldom changes between two positions of a fleet), its hop counts are kept."""
+    with `sight`, a pair in range whose chord meets a building hears nothing. Hop counts by a
+    breadth-first search from every station at once (vectorised). When the nodes in range are
+    those of `previous` (the same stations and range a moment before: the graph seldom changes
+    between two positions of a fleet), its hop counts are kept."""
     stations = np.asarray(stations, dtype=float)
     if stations.ndim != 2 or stations.shape[1] != 2:
         stations = stations.reshape(-1, 2)
@@ -170,6 +198,7 @@ def topology(
     limit = _limit(range_m)
     # one (N, B + N) table of squared distances: UAVs to stations, then to UAVs
     hears = _squared(uav_xy, np.concatenate([stations, uav_xy])) <= limit
+    _cut_through_buildings(hears, uav_xy, np.concatenate([stations, uav_xy]), sight)
     if math.isinf(limit):  # (a finite range already hears nothing at an unknown position)
         known = np.isfinite(uav_xy).all(axis=1)
         hears &= known[:, None]
@@ -187,8 +216,9 @@ def topology(
     else:
         hops = _hops(hears[:, :station_count], between)
     return Topology(
-        stations=stations, uav_xy=uav_xy, range_m=float(range_m), hops=hops, hears=hears
-    )
+        stations=stations, uav_xy=uav_xy, range_m=float(range_m), hops=hops, hears=hears,
+        sight=sight,
+    )  # fmt: skip
 
 
 def _hops(to_station: np.ndarray, between: np.ndarray) -> np.ndarray:

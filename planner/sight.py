@@ -128,3 +128,29 @@ def chord_reach(
         if not np.all(sight.clear(samples[:-gap], samples[gap:], step / 2.0)):
             return max((gap - 2) * step, 0.0)
     return float(limit)
+
+
+def sight_json(obstacles: Obstacles) -> dict:
+    """What blocks radio as plain JSON data (the buildings file the ground station writes for
+    the radio medium process, `sight_from_json` reads it): `{"polygons": [[[x, y], ...], ...],
+    "walls": [[[x, y], [x, y]], ...]}`, local metres."""
+    return {
+        "polygons": [np.asarray(p, float).tolist() for p in obstacles.polygons],
+        "walls": np.asarray(obstacles.walls, float).tolist(),
+    }
+
+
+def sight_from_json(data) -> Sight:
+    """`Sight` of `sight_json`'s data; `ValueError` naming what is wrong."""
+    if not isinstance(data, dict) or set(data) != {"polygons", "walls"}:
+        raise ValueError('expected an object with "polygons" and "walls"')
+    try:
+        polygons = [np.asarray(p, float).reshape(-1, 2) for p in data["polygons"]]
+        walls = np.asarray(data["walls"], float).reshape(-1, 2, 2)
+    except (TypeError, ValueError):
+        raise ValueError("expected lists of [x, y] points in metres") from None
+    if any(len(p) < 3 for p in polygons):
+        raise ValueError("expected polygons of at least 3 points")
+    if not all(np.isfinite(p).all() for p in polygons) or not np.isfinite(walls).all():
+        raise ValueError("expected finite coordinates")
+    return Sight(Obstacles(polygons=tuple(polygons), walls=walls))

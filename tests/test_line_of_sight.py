@@ -138,3 +138,25 @@ def test_an_unknown_rule_is_refused(tmp_path, gcs_main):
     result = gcs_main("mission", "check", with_rule(tmp_path, EXAMPLES / "small.yaml", "sight"))
     assert result.returncode == 2 and result.stderr.count("\n") == 1
     assert "connectivity.rule" in result.stderr and "line_of_sight" in result.stderr
+
+
+def test_through_a_medium_that_knows_buildings_the_disk_plan_breaks_and_the_sight_plan_holds(
+    tmp_path,
+):
+    """`radio.buildings: true`: the fast mode's medium cuts links through obstacles. The small
+    mission's disk plan loses UAV 1 behind the block (the formation holds, then everyone
+    lands: the link stayed lost); its line-of-sight plan flies through, every sample of the
+    medium connected."""
+    source = EXAMPLES / "small.yaml"
+    disk = fly_fast(
+        plan_mission(load_mission(with_rule(tmp_path, source, "disk", radio={"buildings": True}))),
+        FastOptions(),
+    )
+    sight = fly_fast(
+        plan_mission(load_mission(with_rule(tmp_path, source, radio={"buildings": True}))),
+        FastOptions(),
+    )
+    assert disk.run_json["completed"] is False and "link lost" in disk.run_json["reason"]
+    assert disk.run_json["radio"]["connected_fraction"] < 0.9
+    assert sight.run_json["completed"] is True
+    assert sight.run_json["radio"]["connected_fraction"] == 1.0

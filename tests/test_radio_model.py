@@ -222,3 +222,40 @@ def test_the_true_position_is_read_from_sim_state_frames_in_a_batch(signed):
     np.testing.assert_allclose(xy, enu[0, :2], atol=0.02)
     np.testing.assert_allclose(velocity, [-3.0, 4.0])  # east, north
     assert frames(b"not mavlink") == []
+
+
+def test_with_buildings_a_pair_in_range_behind_one_hears_nothing():
+    """`radio.buildings`: a station and a UAV in range with a block between them are not
+    linked; the UAV then reaches the station through a second one that sees round the block;
+    a ground user behind the block is reached only through a UAV (the one it sees round it)."""
+    from planner.obstacles import Obstacles
+    from planner.sight import Sight, sight_from_json, sight_json
+
+    block = Obstacles(
+        polygons=(np.array([[40.0, -20.0], [60.0, -20.0], [60.0, 20.0], [40.0, 20.0]]),)
+    )
+    sight = sight_from_json(sight_json(block))  # the medium process reads it back so
+    assert isinstance(sight, Sight)
+    stations = np.array([[0.0, 0.0]])
+    uavs = np.array([[100.0, 0.0], [50.0, 60.0]])  # behind the block; above it, seen by both
+    disk = topology(stations, uavs, 120.0)
+    walled = topology(stations, uavs, 120.0, sight=sight)
+    assert disk.hops.tolist() == [1, 1]
+    assert walled.hops.tolist() == [2, 1]
+    assert not walled.hears_station[0, 0] and walled.hears_uav[0, 1]
+    ground = np.array([[100.0, 10.0]])  # behind the block: the station is hidden
+    assert disk.hops_of_ground_nodes(ground).tolist() == [1]
+    assert walled.hops_of_ground_nodes(ground).tolist() == [2]  # through UAV 2, above it
+
+
+def test_a_buildings_file_that_is_not_one_is_refused_in_one_line(tmp_path, capsys):
+    from medium.cli import main
+
+    bad = tmp_path / "buildings.json"
+    bad.write_text('{"polygons": [[[0, 0], [1, 1]]], "walls": []}')
+    code = main(["--count", "1", "--base-port", "15000", "--vehicle-ports", "15100",
+                 "--positions", "0,0", "--stations", "0,0", "--range", "100",
+                 "--buildings", str(bad)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "--buildings" in err
+    assert "at least 3 points" in err and "Traceback" not in err

@@ -41,6 +41,7 @@ from medium.medium import MediumModel
 from medium.radio import DelayLine, RadioConfig
 from planner.guarantees import GuaranteeSamples, check_positions
 from planner.kinematics import LineFormation, SpeedProfile
+from planner.sight import Sight
 from vehicles.autopilot import AutopilotConfig
 from vehicles.dynamics import Airframe, Disturbances, DynamicsConfig
 from vehicles.fleet_speed import LeaderRequest
@@ -226,6 +227,7 @@ def radio_config(mission) -> RadioConfig:
         calibration=load_calibration(radio.calibration or DEFAULT_CALIBRATION)
         if calibrated
         else None,
+        sight=Sight(mission.obstacles) if radio.buildings else None,
     )
 
 

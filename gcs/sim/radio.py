@@ -16,12 +16,14 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from gcs.sim.children import start_child
+from planner.sight import sight_json
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +47,8 @@ class MediumSetup:
     report_period_s: float = 0.5  # simulated
     model: str = "simple"  # or "calibrated": draws from an ns-3 table (medium.radio)
     calibration: Path | None = None  # the table of "calibrated" (None: the medium's own)
+    #: `radio.buildings`: what blocks a link (`planner.sight.sight_json`), None: nothing
+    buildings: dict | None = None
 
 
 def medium_setup(mission) -> MediumSetup | None:
@@ -63,6 +67,7 @@ def medium_setup(mission) -> MediumSetup | None:
         ground_users=tuple((u.x, u.y, u.rate_bps) for u in mission.ground_users),
         model=radio.model,
         calibration=radio.calibration,
+        buildings=sight_json(mission.obstacles) if radio.buildings else None,
     )
 
 
@@ -110,6 +115,14 @@ class MediumProcess:
         self._reports.bind((self.host, 0))
         self._reports.setblocking(False)
         report_port = self._reports.getsockname()[1]
+        self._buildings = None
+        if setup.buildings is not None:  # the obstacles, for the medium to read
+            self._buildings = tempfile.NamedTemporaryFile(  # noqa: SIM115 (closed in close())
+                "w", prefix="fleetline-buildings-", suffix=".json", delete=False
+            )
+            json.dump(setup.buildings, self._buildings)
+            self._buildings.close()
+            extra_args = ("--buildings", self._buildings.name, *extra_args)
         cmd = [
             sys.executable, "-m", "medium.cli",
             "--count", str(len(vehicle_ports)),
@@ -138,6 +151,8 @@ class MediumProcess:
             self.process = start_child(cmd, root=Path(__file__).resolve().parents[2], stderr=stderr)
         except OSError:
             self._reports.close()
+            if self._buildings is not None:
+                Path(self._buildings.name).unlink(missing_ok=True)
             raise
         finally:
             if stderr is not subprocess.DEVNULL:
@@ -182,3 +197,5 @@ class MediumProcess:
             self.process.wait(timeout=3.0)
         self.reports()
         self._reports.close()
+        if self._buildings is not None:
+            Path(self._buildings.name).unlink(missing_ok=True)

@@ -81,16 +81,22 @@ def test_a_disk_plan_says_how_often_its_links_pass_through_buildings(gcs_main, c
     assert len(warnings) == 1
     assert "connected by line of sight 14." in warnings[0]
     assert f"needs {connectivity['rigid_los_fleet_size']} UAVs" in warnings[0]
+    assert "connectivity.rule: line_of_sight" in warnings[0]
 
 
 def test_the_line_of_sight_plan_of_the_small_mission_is_connected_at_every_instant(tmp_path):
+    """Its corners taken three times wider (15 m), the path's chords are clear 98 m apart:
+    the 4 UAVs of eq. 28 keep line of sight, where the shortest path needs 10."""
     plan = plan_mission(load_mission(with_rule(tmp_path, EXAMPLES / "small.yaml")))
     disk = plan_mission(load_mission(EXAMPLES / "small.yaml"))
-    assert plan.valid and plan.fleet_size > disk.fleet_size
+    assert plan.valid and plan.fleet_size == disk.fleet_size == 4
+    assert plan_json(disk)["connectivity"]["rigid_los_fleet_size"] == 10
     data = plan_json(plan)["connectivity"]
     assert data["rule"] == "line_of_sight" and data["los_connected_fraction"] == 1.0
     assert data["fleet_size"] == data["rigid_los_fleet_size"] == plan.fleet_size
+    assert data["corner_margin_m"] > plan.mission.safety_margin
     assert plan.formation.radio_spacing == pytest.approx(data["los_reach_m"])
+    assert plan.path_plan.length_m > disk.path_plan.length_m and not plan.path_plan.certified
     assert_connected_by_sight(plan)
     # the disk plan is not: the brute force finds an instant cut off by a building
     with pytest.raises(AssertionError):
@@ -121,11 +127,12 @@ def test_flown_in_the_fast_mode_the_line_of_sight_plan_stays_connected_by_sight(
 
 
 def test_a_fixed_fleet_too_small_for_line_of_sight_is_refused_with_the_number(tmp_path, gcs_main):
-    path = with_rule(tmp_path, EXAMPLES / "table-ii.yaml")  # fleet.size: 9
+    """city-blocks: eq. 28 needs 8 UAVs, line of sight 10 (corners taken wider; 64 without)."""
+    path = with_rule(tmp_path, EXAMPLES / "city-blocks.yaml", fleet={"size": 8})
     result = gcs_main("mission", "check", path)
     assert result.returncode == 2 and result.stderr.count("\n") == 1
     assert "fleet.size" in result.stderr and "for line of sight" in result.stderr
-    assert "at least 56 UAVs" in result.stderr
+    assert "at least 10 UAVs" in result.stderr
 
 
 def test_a_stations_mission_with_line_of_sight_is_refused(tmp_path, gcs_main):

@@ -1,7 +1,7 @@
 """A line-of-sight mission flown end to end (real `gcs`, `vehicles` and radio medium processes
 over loopback UDP), the medium cutting every link whose chord meets an obstacle
 (`radio.buildings: true`, its buildings file written by the ground station): the small
-mission's line-of-sight formation (10 UAVs) completes, every sample of the medium connected,
+mission's line-of-sight formation (its corners taken wider) completes, every sample of the medium connected,
 every sample of the ground station connected by line of sight."""
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def test_a_line_of_sight_mission_flies_connected_through_a_medium_that_knows_bui
         flight.kill()
     run = json.loads(out)
     assert code == 0, err[-3000:]
-    assert run["completed"] is True and run["fleet_size"] == 10
+    assert run["completed"] is True
     assert run["radio"]["connected_fraction"] == 1.0
     assert run["los_connected_fraction"] == 1.0
     assert run["max_tracking_error_m"] < 5.0

@@ -621,3 +621,30 @@ def test_the_live_port_refuses_web_pages_of_other_origins(tmp_path: Path):
             assert _upgrade_status(port, origin).startswith(b"HTTP/1.1 101"), origin
     finally:
         recorder.close()
+
+
+def test_links_through_a_building_are_marked_and_drawn_apart(tmp_path: Path, planned):
+    """`/fleet` lists the disk links whose chord meets an obstacle; `/scene` draws them in a
+    red line list of their own, the clear ones green."""
+    _, plan, plan_data, _ = planned
+    clock, wall = _anchored_clock()
+    path = tmp_path / "run.mcap"
+    recorder = FlightRecorder(path, clock)
+    recorder.describe(plan, plan_data, wall.now)
+    positions = np.full((plan.fleet_size, 3), np.nan)
+    positions[0] = [100.0, 50.0, 20.0]  # west of the 60 x 80 m block at (150, 50)
+    positions[1] = [200.0, 50.0, 20.0]  # east of it: 100 m apart, in range, no sight
+    positions[2] = [100.0, 130.0, 20.0]  # north of UAV 1: sees it (UAV 2 is out of range)
+    recorder.fleet(1.0, positions, np.zeros((plan.fleet_size, 2)), wall.now + 1.0)
+    recorder.close()
+    with open(path, "rb") as handle:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory(), JsonDecoderFactory()])
+        last = {c.topic: m for _, c, _, m in reader.iter_decoded_messages()}
+    fleet = last["/fleet"]
+    assert [1, 2] in fleet["uav_links"] and fleet["blocked_uav_links"] == [[1, 2]]
+    assert fleet["uav_links"] == [[1, 2], [1, 3]]
+    lines = {e.id: e for e in last["/scene"].entities}["radio_links"].lines
+    colours = [(round(line.color.r, 2), round(line.color.g, 2)) for line in lines]
+    assert colours == [(0.2, 0.85), (0.9, 0.2)]  # scene.LINK_GREEN, scene.LINK_RED
+    red = [(p.x, p.y) for p in lines[1].points]
+    assert sorted(red) == [(100.0, 50.0), (200.0, 50.0)]

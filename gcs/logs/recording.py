@@ -67,6 +67,7 @@ from gcs.flight.records import (
 )
 from gcs.logs import scene
 from gcs.logs.foxglove_front import FoxgloveFront
+from planner.sight import Sight
 
 log = logging.getLogger(__name__)
 
@@ -215,6 +216,8 @@ SCHEMAS: dict[str, dict] = {
             "radio_links": _INT,
             "uav_links": {"type": "array", "items": _VEC},
             "station_links": {"type": "array", "items": _VEC},
+            "blocked_uav_links": {"type": "array", "items": _VEC},
+            "blocked_station_links": {"type": "array", "items": _VEC},
         },
         ["t"],
     ),
@@ -556,6 +559,7 @@ class FlightRecorder:
         self.plan(plan_data, wall)
         geometry = scene.SceneGeometry.from_plan(plan)
         self._geometry = geometry
+        self._sight = Sight(geometry.obstacles)
         self._static_scene = scene.encode_static_scene(geometry)
         self._geojson = {
             "/map/obstacles": scene.obstacles_geojson(geometry),
@@ -590,7 +594,12 @@ class FlightRecorder:
         uav_pairs, station_pairs = scene.radio_links(
             positions, geometry.stations, geometry.radio_range
         )
-        links = scene.links_update(positions, geometry.stations, uav_pairs, station_pairs)
+        xy = positions[:, :2]
+        blocked = ~self._sight.clear(
+            np.concatenate([xy[uav_pairs[:, 0]], xy[station_pairs[:, 0]]]),
+            np.concatenate([xy[uav_pairs[:, 1]], geometry.stations[station_pairs[:, 1]]]),
+        )
+        links = scene.links_update(positions, geometry.stations, uav_pairs, station_pairs, blocked)
         self.write(self._scene, self._static_scene + links, wall)
         xy = positions[:, :2]
         known = xy[np.isfinite(xy).all(axis=1)]
@@ -610,6 +619,11 @@ class FlightRecorder:
                 "radio_links": len(uav_pairs) + len(station_pairs),
                 "uav_links": (uav_pairs + 1).tolist(),
                 "station_links": [[u + 1, s] for u, s in station_pairs.tolist()],
+                # ... of those, the ones whose chord meets an obstacle (no line of sight)
+                "blocked_uav_links": (uav_pairs[blocked[: len(uav_pairs)]] + 1).tolist(),
+                "blocked_station_links": [
+                    [u + 1, s] for u, s in station_pairs[blocked[len(uav_pairs) :]].tolist()
+                ],
             },
             wall,
         )

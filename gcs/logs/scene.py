@@ -115,6 +115,7 @@ STATION_GREEN = Color(r=0.17, g=0.63, b=0.17, a=1.0)
 POINT_GOLD = Color(r=1.0, g=0.84, b=0.0, a=1.0)
 USER_PURPLE = Color(r=0.58, g=0.4, b=0.74, a=1.0)
 LINK_GREEN = Color(r=0.2, g=0.85, b=0.3, a=0.7)
+LINK_RED = Color(r=0.9, g=0.2, b=0.15, a=0.7)  # in range, through a building
 WHITE = Color(r=1.0, g=1.0, b=1.0, a=1.0)
 
 
@@ -450,21 +451,30 @@ def radio_links(
 
 
 def links_update(
-    positions: np.ndarray, stations: np.ndarray, pairs: np.ndarray, reach: np.ndarray
+    positions: np.ndarray,
+    stations: np.ndarray,
+    pairs: np.ndarray,
+    reach: np.ndarray,
+    blocked: np.ndarray | None = None,
 ) -> bytes:
-    """The `radio_links` entity (every link of `radio_links`, one line list), encoded. An
-    empty list replaces the previous links."""
+    """The `radio_links` entity (every link of `radio_links`), encoded: one green line list
+    of the links in line of sight, one red of those whose chord meets an obstacle
+    (`blocked`, one flag per pair then per station link; None: none). An empty list
+    replaces the previous links."""
     xyz = np.asarray(positions, float)
     ends = [xyz[pairs[:, 0]], xyz[pairs[:, 1]]]
     if len(reach):
         ends[0] = np.vstack([ends[0], xyz[reach[:, 0]]])
         ends[1] = np.vstack([ends[1], _with_z(stations[reach[:, 1]], MAST_HEIGHT_M)])
     segments = np.stack(ends, axis=1)
-    entity = SceneEntity(
-        frame_id=MAP_FRAME,
-        id="radio_links",
-        lines=[_line_list(segments, LINK_GREEN, 0.3)] if len(segments) else [],
-    )
+    if blocked is None:
+        blocked = np.zeros(len(segments), bool)
+    lines = [
+        _line_list(segments[mask], color, 0.3)
+        for mask, color in ((~blocked, LINK_GREEN), (blocked, LINK_RED))
+        if mask.any()
+    ]
+    entity = SceneEntity(frame_id=MAP_FRAME, id="radio_links", lines=lines)
     return SceneUpdate(entities=[entity]).encode()
 
 

@@ -253,14 +253,7 @@ def plan_mission(
         check_rows(mission, problem, path_plan.rows, size)
     _check_fleet(mission, size, conns, conn_key)
 
-    formation = LineFormation(
-        path=path_plan.path,
-        fleet_size=size,
-        safety_margin=mission.safety_margin,
-        radio_range=mission.radio_range,
-        rows=path_plan.rows,
-        spacing=spacing,
-    )
+    formation = _formation(mission, path_plan, size, spacing)
     flown = _flown(invalid, formation, cap_speed)
     return replace(flown, connectivity=_connectivity(mission, formation, corner_margin))
 
@@ -281,6 +274,20 @@ WIDER_GAP = 0.01
 #: ladder stops at the first wider plan that fails or is longer (wider ones would be too):
 #: Helsinki's 4 rho_c plan (18 UAVs instead of 19) flew a path 51 % longer.
 WIDER_LENGTH = 1.25
+
+
+def _formation(
+    mission: Mission, path_plan: PathPlan, size: int, spacing: float | None = None
+) -> LineFormation:
+    """The A -> B line formation of `size` UAVs on `path_plan` (dS = `spacing`, or dS_r)."""
+    return LineFormation(
+        path=path_plan.path,
+        fleet_size=size,
+        safety_margin=mission.safety_margin,
+        radio_range=mission.radio_range,
+        rows=path_plan.rows,
+        spacing=spacing,
+    )
 
 
 def _extended_path(formation: LineFormation) -> np.ndarray:
@@ -413,13 +420,7 @@ def _rigid_sight(
     spacing_c = collision_spacing(mission.safety_margin)
     spacing_r = radio_spacing(mission.safety_margin, mission.radio_range)
     for _ in range(SIGHT_ROUNDS):
-        disk = LineFormation(
-            path=path_plan.path,
-            fleet_size=size,
-            safety_margin=mission.safety_margin,
-            radio_range=mission.radio_range,
-            rows=path_plan.rows,
-        )
+        disk = _formation(mission, path_plan, size)
         reach = _sight_reach(mission, disk)
         if reach <= spacing_c + DISTANCE_TOLERANCE:
             return None

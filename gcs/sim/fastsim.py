@@ -171,17 +171,7 @@ def with_fleet_size(plan: MissionPlan, fleet_size: int) -> MissionPlan:
                 f"station, not {fleet_size}"
             )
         return plan
-    return replace(
-        plan,
-        formation=LineFormation(
-            path=formation.path,
-            fleet_size=fleet_size,
-            safety_margin=formation.safety_margin,
-            radio_range=formation.radio_range,
-            rows=formation.rows,
-            spacing=formation.spacing,
-        ),
-    )
+    return replace(plan, formation=replace(formation, fleet_size=fleet_size))
 
 
 def mission_dynamics(mission) -> DynamicsConfig:

@@ -334,6 +334,9 @@ def test_log_report_writes_every_figure_and_the_numbers(flown, read, gcs_log, tm
     for key in ("min_uav_uav_m", "min_uav_obstacle_m", "max_tracking_error_m"):
         assert summary[key] == pytest.approx(run[key], rel=1e-12), key
     assert summary["connected_fraction"] == run["connected_fraction"]
+    # by line of sight: the small mission's chain passes behind its block for a while
+    assert summary["los_connected_fraction"] == pytest.approx(run["los_connected_fraction"])
+    assert 0.5 < summary["los_connected_fraction"] < 1.0
     assert summary["tracking_error_m"] == pytest.approx(
         [u["max_tracking_error_m"] for u in run["per_uav"]], rel=1e-12
     )

@@ -44,6 +44,7 @@ from planner.formation import ParkingRows  # noqa: E402
 from planner.guarantees import check_positions  # noqa: E402
 from planner.kinematics import LineFormation, SpeedProfile  # noqa: E402
 from planner.obstacles import Obstacles  # noqa: E402
+from planner.sight import Sight
 from planner.types import PathPlan  # noqa: E402
 
 #: The figures `write_report` draws (file name -> what it shows).
@@ -54,6 +55,8 @@ FIGURES = {
     "speed_reactions.png": "reaction time of each UAV to each speed change, T_dv (fig. 10)",
     "base_stations.png": "packets received at the base stations over time (figs. 12, 13)",
     "distance_travelled.png": "distance travelled per UAV against time (fig. 3)",
+    "connectivity.png": "every UAV connected to a base station over time: by distance (the "
+    "paper's disk) and by line of sight (every hop's chord clear of the obstacles)",
 }
 DPI = 110
 
@@ -103,6 +106,8 @@ class FlightMetrics:
     uav_obstacle_m: np.ndarray  # (S,)
     connected: np.ndarray  # (S,) 1.0 / 0.0, NaN when not every UAV was known
     tracking_error_m: list[np.ndarray]  # per UAV, at its track's times
+    #: (S,) as `connected`, every hop also in line of sight (`planner.sight`)
+    los_connected: np.ndarray = field(default_factory=lambda: np.zeros(0))
     summary: dict[str, Any] = field(default_factory=dict)
 
 
@@ -293,7 +298,9 @@ def flight_metrics(flight: Flight) -> FlightMetrics:
     pair = np.full(count, np.nan)
     obstacle = np.full(count, np.nan)
     connected = np.full(count, np.nan)
+    los_connected = np.full(count, np.nan)
     obstacles = flight.mission.obstacles if flight.mission is not None else Obstacles()
+    sight = Sight(obstacles)
     stations = _base_stations(flight)
     out = flight.sample_out if flight.sample_out is not None else np.zeros((count, size), bool)
     heights = flight.sample_heights
@@ -319,6 +326,15 @@ def flight_metrics(flight: Flight) -> FlightMetrics:
         )
         if (mask | left).all():
             connected[rows] = checked.connected.astype(float)
+            by_sight = check_positions(
+                positions[rows][:, mask],
+                Obstacles(),
+                stations,
+                flight.radio_range,
+                np.nan_to_num(heights[rows][:, mask]) if above else None,
+                sight=sight,
+            )
+            los_connected[rows] = by_sight.connected.astype(float)
     relieved_from = min((float(r["t"]) for r in flight.reliefs), default=math.inf)
     errors = []
     for index, track in enumerate(flight.tracks):
@@ -328,7 +344,7 @@ def flight_metrics(flight: Flight) -> FlightMetrics:
         virtual = flight.formation.positions(flight.profile.distance(track.times))[:, index]
         error = np.hypot(*(track.positions[:, :2] - virtual).T)
         errors.append(np.where(track.times < relieved_from, error, track.logged_error))
-    metrics = FlightMetrics(pair, obstacle, connected, errors)
+    metrics = FlightMetrics(pair, obstacle, connected, errors, los_connected=los_connected)
     metrics.summary.update(_summary(flight, metrics))
     return metrics
 
@@ -348,6 +364,7 @@ def _summary(flight: Flight, metrics: FlightMetrics) -> dict[str, Any]:
     per_uav = [_finite_max(e) for e in metrics.tracking_error_m]
     worst = [e for e in per_uav if e is not None]
     full = metrics.connected[np.isfinite(metrics.connected)]
+    sighted = metrics.los_connected[np.isfinite(metrics.los_connected)]
     changes = []
     for request in flight.requests:
         reactions = {
@@ -375,6 +392,7 @@ def _summary(flight: Flight, metrics: FlightMetrics) -> dict[str, Any]:
         "min_uav_uav_m": _finite_min(metrics.uav_uav_m),
         "min_uav_obstacle_m": _finite_min(metrics.uav_obstacle_m),
         "connected_fraction": float(full.mean()) if full.size else None,
+        "los_connected_fraction": float(sighted.mean()) if sighted.size else None,
         "max_tracking_error_m": max(worst) if worst else None,
         "tracking_error_m": per_uav,
         "distance_travelled_m": [
@@ -499,6 +517,31 @@ def distances_figure(flight: Flight, metrics: FlightMetrics) -> Figure:
         ax.set_ylabel("distance (m)")
         ax.grid(alpha=0.3, which="both")
     bottom.set_xlabel("mission time (s)")
+    return fig
+
+
+def connectivity_figure(flight: Flight, metrics: FlightMetrics) -> Figure:
+    """Whether every UAV reached a base station, against mission time, under both rules."""
+    fig = Figure(figsize=(10, 4), layout="constrained")
+    ax = fig.subplots()
+    t = flight.sample_times
+    if np.isfinite(metrics.connected).any():
+        for values, offset, colour, label in (
+            (metrics.connected, 0.02, "tab:blue", "by distance (disk)"),
+            (metrics.los_connected, -0.02, "tab:orange", "by line of sight"),
+        ):
+            known = np.isfinite(values)
+            share = 100 * float(values[known].mean())
+            ax.step(t[known], values[known] + offset, where="post", color=colour, lw=1.2,
+                    label=f"{label}: {share:.1f} % of samples")  # fmt: skip
+        ax.set_yticks([0, 1], ["cut off", "connected"])
+        ax.set_ylim(-0.3, 1.3)
+        _legend(ax, loc="lower right", fontsize=8)
+    else:
+        _no_data(ax, "no fleet samples with every UAV known")
+    ax.set_title("every UAV connected to a base station")
+    ax.set_xlabel("mission time (s)")
+    ax.grid(alpha=0.3)
     return fig
 
 
@@ -632,6 +675,7 @@ def write_report(recording: Recording, out_dir: Path) -> Report:
         "speed_reactions.png": reactions_figure(flight, metrics),
         "base_stations.png": base_stations_figure(flight),
         "distance_travelled.png": distance_figure(flight),
+        "connectivity.png": connectivity_figure(flight, metrics),
     }
     files = []
     for name, figure in figures.items():
@@ -689,6 +733,13 @@ def summary_markdown(summary: dict[str, Any]) -> str:
             else f"{100 * summary['connected_fraction']:.1f} %"
         )
         + " | 100 % |",
+        "| connected by line of sight | "
+        + (
+            "n/a"
+            if summary["los_connected_fraction"] is None
+            else f"{100 * summary['los_connected_fraction']:.1f} %"
+        )
+        + " | 100 % with `connectivity.rule: line_of_sight` |",
         "",
         "| UAV | max tracking error | distance travelled | telemetry received |",
         "|---|---|---|---|",

@@ -296,3 +296,25 @@ def test_the_table_survives_a_row_cut_short(tmp_path):
     with RowWriter(path, sync=False) as writer:
         writer.append({"id": "c", "v": 3})
     assert [r["id"] for r in read_rows(path)] == ["a", "c"]
+
+
+def test_a_connectivity_axis_plans_and_flies_both_rules(gcs_main, tmp_path):
+    """`axes.connectivity: [disk, line_of_sight]` on the small mission: the line-of-sight run
+    is connected by line of sight at every sample, the disk run is not; a rule that does not
+    exist is refused with the axis named."""
+    shutil.copy(Path(__file__).resolve().parents[1] / "examples" / "small.yaml", tmp_path)
+    study = tmp_path / "study.yaml"
+    study.write_text(
+        "version: 1\nbase: small.yaml\naxes:\n  connectivity: [disk, line_of_sight]\n"
+        "metrics: [fleet_size, completed, connected_fraction, los_connected_fraction]\n"
+    )
+    out = tmp_path / "out"
+    result = gcs_main("eval", "study", study, "--out", out, "--engine", "process")
+    assert result.returncode == 0, result.stderr
+    rows = {r["params"]["connectivity"]: r for r in read_rows(out / "runs.jsonl")}
+    assert rows["line_of_sight"]["metrics"]["los_connected_fraction"] == 1.0
+    assert rows["disk"]["metrics"]["los_connected_fraction"] < 0.95
+    assert all(r["metrics"]["completed"] for r in rows.values())
+    study.write_text("version: 1\nbase: small.yaml\naxes:\n  connectivity: [sight]\n")
+    bad = gcs_main("eval", "study", study, "--out", out)
+    assert bad.returncode == 2 and "axes.connectivity[0]" in bad.stderr

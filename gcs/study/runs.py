@@ -54,6 +54,8 @@ def mission_data(base: dict, params: dict[str, Any]) -> dict:
             data[name] = params[name]
     if "radio" in params:
         data["radio"] = {**(data.get("radio") or {}), **params["radio"]}
+    if "connectivity" in params:
+        data["connectivity"] = {**(data.get("connectivity") or {}), "rule": params["connectivity"]}
     return data
 
 
@@ -159,6 +161,7 @@ def _flight_metrics(plan, flown, mission: Mission, speed, leader) -> dict[str, A
         "min_uav_obstacle_m": m["min_uav_obstacle_m"],
         "max_tracking_error_m": m["max_tracking_error_m"],
         "connected_fraction": m["connected_fraction"],
+        "los_connected_fraction": flown.run_json.get("los_connected_fraction"),
         "uav_delivery": _ratio(m["uav_data"]),
         "uav_dropped": m["uav_data"]["dropped"],
         "uav_delay_mean_ms": m["uav_data"]["delay_mean_ms"],

@@ -22,6 +22,7 @@ from typing import Any
 
 from gcs.errors import InputError, join_key
 from gcs.mission import (
+    CONNECTIVITY_RULES,
     MissionParser,
     describe_value,
     load_mission,
@@ -48,6 +49,7 @@ AXES = {
     "safety_margin": "rho_c, m",
     "radio_range": "rho_R, m",
     "radio": "a mapping merged into the mission's radio section",
+    "connectivity": "the mission's connectivity.rule: disk or line_of_sight",
     "network": "medium (the fast mode's radio only) or ns3 (the flight also replayed in ns-3)",
     "planner": "the path search method: exact or penalty",
 }
@@ -68,6 +70,8 @@ METRICS = {
     "min_uav_uav_m": "smallest UAV-UAV distance, m",
     "min_uav_obstacle_m": "smallest UAV-obstacle distance, m",
     "max_tracking_error_m": "largest distance of a UAV from its set point, m",
+    "los_connected_fraction": "share of the ground station's samples with every UAV connected "
+    "by line of sight",
     "connected_fraction": "fraction of samples with every UAV connected to a base station",
     "uav_delivery": "UAV data packets received at a base station / sent",
     "uav_dropped": "UAV data packets dropped",
@@ -415,6 +419,8 @@ class _StudyParser(MissionParser):
             return dict(value)
         if name == "network":
             return self.choice(value, key, NETWORKS)
+        if name == "connectivity":
+            return self.choice(value, key, CONNECTIVITY_RULES)
         return self.choice(value, key, METHODS)  # planner
 
     def check_overrides(self, study: Study) -> None:
@@ -424,7 +430,7 @@ class _StudyParser(MissionParser):
 
         base = parse_yaml(study.base_text)
         for name, values in study.axes:
-            if name not in ("safety_margin", "radio_range", "radio", "fleet_size"):
+            if name not in ("safety_margin", "radio_range", "radio", "fleet_size", "connectivity"):
                 continue
             for i, value in enumerate(values):
                 data = mission_data(base, {name: value})

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,8 +23,21 @@ def helsinki():
     return load_mission(HELSINKI)
 
 
-def test_helsinki_example_is_planned_certified_and_valid(helsinki, gcs_main):
-    result = gcs_main("mission", "check", HELSINKI, "--json")
+@pytest.fixture(scope="module")
+def helsinki_disk(tmp_path_factory) -> Path:
+    """The example under the paper's disk rule (its own is line of sight, whose corners are
+    taken wider: no shortest path to certify)."""
+    folder = tmp_path_factory.mktemp("helsinki")
+    text = HELSINKI.read_text().replace("rule: line_of_sight", "rule: disk")
+    (folder / HELSINKI.name).write_text(text)
+    for footprints in EXAMPLES.glob("helsinki-centre.geojson"):
+        (folder / footprints.name).write_bytes(footprints.read_bytes())
+    return folder / HELSINKI.name
+
+
+def test_helsinki_example_is_planned_certified_and_valid(helsinki_disk, gcs_main):
+    helsinki = load_mission(helsinki_disk)
+    result = gcs_main("mission", "check", helsinki_disk, "--json")
     assert result.returncode == 0, result.stderr
     plan = json.loads(result.stdout)
     assert plan["valid"] and plan["certified"] and not plan["stopped"]

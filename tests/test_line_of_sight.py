@@ -68,8 +68,8 @@ def assert_connected_by_sight(plan, samples: int = 150) -> None:
         assert brute_connected(xy, stations, polygons, walls, mission.radio_range), distance
 
 
-def test_a_disk_plan_says_how_often_its_links_pass_through_buildings(gcs_main, caplog):
-    path = EXAMPLES / "city-blocks.yaml"
+def test_a_disk_plan_says_how_often_its_links_pass_through_buildings(gcs_main, caplog, tmp_path):
+    path = with_rule(tmp_path, EXAMPLES / "city-blocks.yaml", "disk")
     result = gcs_main("mission", "plan", path, "--json")
     assert result.returncode == 0
     connectivity = json.loads(result.stdout)["connectivity"]

@@ -89,6 +89,23 @@ def test_a_stall_pauses_the_mission_where_the_uavs_stand(plan):
     assert run.run_json["max_tracking_error_m"] < plan.mission.safety_margin
 
 
+@pytest.mark.parametrize("start", [5.0, 13.0])
+def test_a_stall_as_long_as_the_setpoint_timeout_picks_the_uavs_up_at_their_speed(plan, start):
+    """The ground station stops 1 s (a 1 s SIGSTOP at 1x), the vehicles' setpoint timeout:
+    they flew their last setpoints on (UAV 2, joining at 5 s, accelerating) and had just
+    begun to brake when the backlog was read. A standing start there (the old rule) left the
+    reference still while they flew on at up to 8 m/s: 10.2 m at 5 s, 3.5 m and a hold at
+    13 s. The formation resumes at their speed, no hold, well within rho_c."""
+    run = fly(plan, gcs_stalls=((start, start + 1.0),))
+    (stall,) = run.stalls
+    window = run.result.smoothing_window_s
+    assert stall.paused_at <= stall.resumed_at < stall.paused_at + window / 2  # not stopped
+    assert stall.paused_at >= stall.stood_at + 0.9  # they flew nearly all of it
+    assert "hold" not in kinds(run) and "tracking" not in kinds(run)
+    assert run.run_json["completed"] is True
+    assert run.run_json["max_tracking_error_m"] < 3.0
+
+
 def test_a_stall_longer_than_the_gcs_failsafe_resumes_where_the_uavs_stand(plan):
     """The ground station stops for 6.5 s (no lockstep: SITL, real vehicles): longer than the
     vehicles' GCS failsafe (5 s), so they brake (BRAKE, out of guided flight) before the

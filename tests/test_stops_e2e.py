@@ -24,16 +24,6 @@ from tests.flying import Flight, children_running, flight_speedup, mission_file
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.timeout(300),
-    # Known defect (issue 32, left open): at speed-ups of 1.5 and below (quiet at 1x; at 1.5x
-    # beside a CPU hog) the fleet breaks rho_c right after the ground station's 1 s stop:
-    # 0.9 s after the stall's standing start UAVs 1-3 were 5.06-5.26 m from their targets
-    # (quiet, 1x), and holds at 3.5 m followed for tens of seconds. 2x never showed it in six
-    # quiet flights. The stall's resume point or its standing start is wrong at those speeds.
-    # Not strict: a flight at 2x passes.
-    pytest.mark.xfail(
-        strict=False,
-        reason="rho_c broken after a 1 s ground-station stall at speed-ups <= 1.5 (issue 32)",
-    ),
 ]
 
 SPEEDUP = flight_speedup(2)

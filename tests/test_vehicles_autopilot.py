@@ -467,3 +467,46 @@ def test_a_process_catching_up_hands_each_message_over_when_its_clock_reaches_it
         assert sim.autopilots[0].mode == Mode.GUIDED
     finally:
         sim.close()
+
+
+@pytest.mark.slow  # the simulation binds its vehicle's UDP socket (never read here)
+def test_every_clock_slip_is_reported_with_its_total_none_dropped():
+    """Slips are said at most every `_SLIP_REPORT_INTERVAL_S` of wall clock, with the total
+    since the last report. A slip inside the interval is said once the interval is over
+    (the run loop asks at every wake-up), not held back until a later slip (it was, so the
+    ground station kept mapping that vehicle's samples a slip too early)."""
+    from fleetwire.messages import parse_clock_slipped
+    from vehicles.sim import _SLIP_REPORT_INTERVAL_S, SimConfig, Simulation, VehicleSpec
+
+    sim = Simulation(
+        SimConfig(
+            vehicles=(VehicleSpec(1, 0, (0.0, 0.0, 0.0)),),
+            autopilot=AutopilotConfig(boot_time_s=0.0),
+        )
+    )
+    step_s = sim.config.dynamics.step_s
+    autopilot = sim.autopilots[0]
+
+    def reported() -> list[float]:
+        slips = [
+            parse_clock_slipped(m.text) for m in autopilot.outbox if m.get_type() == "STATUSTEXT"
+        ]
+        autopilot.outbox.clear()
+        return [s for s in slips if s is not None]
+
+    try:
+        reported()
+        sim._slip(round(0.5 / step_s), now=100.0)  # the first slip: said at once
+        assert reported() == pytest.approx([0.5])
+        sim._slip(round(0.25 / step_s), now=100.2)  # inside the interval: held
+        sim._slip(round(0.25 / step_s), now=100.4)
+        assert reported() == []
+        sim._report_slip(100.0 + _SLIP_REPORT_INTERVAL_S / 2)
+        assert reported() == []
+        sim._report_slip(100.0 + _SLIP_REPORT_INTERVAL_S)  # the interval is over: the total
+        assert reported() == pytest.approx([0.5])
+        sim._report_slip(100.0 + 3 * _SLIP_REPORT_INTERVAL_S)  # nothing new: nothing said
+        assert reported() == []
+        assert sim.stats.slipped_sim_s == pytest.approx(1.0)
+    finally:
+        sim.close()

@@ -45,7 +45,10 @@ log = logging.getLogger(__name__)
 DEFAULT_ORIGIN = GeodeticOrigin(45.7640, 4.8357, 170.0)
 _EPOLL_RESOLUTION_S = 0.001
 _MAX_TICKS_PER_WAKE = 10
-_SLIP_REPORT_INTERVAL_S = 5.0
+#: Clock slips are reported at most this often (wall s), each report with the total since the
+#: last: the ground station moves its vehicle clocks by it (a slip held back 5 s, as before,
+#: left its samples mapped a second early for that long).
+_SLIP_REPORT_INTERVAL_S = 1.0
 #: Longest wait (wall s) while the world clock holds this process at its cap.
 _WORLD_POLL_S = 0.002
 
@@ -200,6 +203,8 @@ class Simulation:
             if due - self._steps > max_lag_steps and not clock.joined:
                 self._slip(due - self._steps - max_lag_steps, now)
                 due = self._steps + max_lag_steps
+            elif self._slip_unreported:
+                self._report_slip(now)
             self.advance(min(due, self._steps + max_steps_per_wake), self._receive())
             clock.advanced_to(self.sim_time())
             next_tick = (self._steps // self._steps_per_tick + 1) * tick_s
@@ -215,8 +220,8 @@ class Simulation:
         return self.stats
 
     def _slip(self, steps: int, now: float) -> None:
-        """Give up catching up ``steps`` steps: the simulated clock slips (and says so, at most
-        every few seconds of wall clock, with the total since the last report)."""
+        """Give up catching up ``steps`` steps: the simulated clock slips (and says so:
+        `_report_slip`)."""
         cfg = self.config
         seconds = steps * cfg.dynamics.step_s
         self.clock.wall0 += seconds / cfg.speedup
@@ -226,7 +231,13 @@ class Simulation:
         ]
         self.stats.slipped_sim_s += seconds
         self._slip_unreported += seconds
-        if now - self._slip_reported_wall < _SLIP_REPORT_INTERVAL_S:
+        self._report_slip(now)
+
+    def _report_slip(self, now: float) -> None:
+        """Say how far the clock slipped since the last report, at most every
+        `_SLIP_REPORT_INTERVAL_S` of wall clock; a slip that fell inside the interval is said
+        as soon as it is over (the run loop asks at every wake-up), never dropped."""
+        if self._slip_unreported <= 0 or now - self._slip_reported_wall < _SLIP_REPORT_INTERVAL_S:
             return
         log.warning("simulation %.2f s behind: the simulated clock slips", self._slip_unreported)
         stamp = Stamp(self.sim_time(), now)

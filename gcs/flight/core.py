@@ -76,6 +76,7 @@ from gcs.flight.records import (
     UavStateRecord,
 )
 from gcs.flight.roster import Roster
+from gcs.flight.stall import Resume, resume_point
 from gcs.geodesy import enu_to_geodetic
 from gcs.link import mavutil
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
@@ -116,6 +117,9 @@ _SEVERITY_LEVEL = {
 MAX_EXTRAPOLATION_S = 1.0
 #: A tick this late (mission seconds, the vehicles' setpoint timeout) is a stall of the GCS.
 STALL_S = 1.0
+#: After a stall the formation may resume this far (mission s) past the frozen clock's raw
+#: time: UAVs that carried an accelerating setpoint on for their 1 s timeout ran ahead of it.
+RESUME_LOOKAHEAD_S = 2.0
 #: ... and at least this late on the wall clock (the vehicles' timeouts have this floor).
 STALL_WALL_FLOOR_S = 0.25
 #: A UAV is told to land only once its reference has been still this long (mission s): if the
@@ -846,26 +850,26 @@ class GroundStation:
         """No setpoint went out from `last` to `now`: each vehicle flew on by itself (its own
         setpoint timeout: carry the last setpoint forward, brake, hold) and the telemetry that
         queued meanwhile has just been read, on a clock frozen at `last`. The mission resumes
-        where the formation stands: at the instant in [t_last, t_now] whose virtual targets best
-        match the following UAVs' latest positions (`_where_the_formation_stands`); at t_last
-        itself when no UAV was following the formation (nothing flew it meanwhile). The mission
-        time never runs backwards: the pause holds it, it never rewinds. The vehicles' clocks
-        are told at once, and the samples taken after that instant map to it."""
+        where the formation stands and as fast as the UAVs move (`gcs.flight.stall`): a pause
+        inserted at the instant whose virtual targets the following UAVs match, as long as they
+        need to be picked up at their speed (a standing start for UAVs that stopped, none for
+        UAVs that flew on); at t_last itself when no UAV was following the formation (nothing
+        flew it meanwhile). The mission time never runs backwards: the pause holds it, it never
+        rewinds. The vehicles' clocks are told at once, and the samples taken after that
+        instant map to it."""
         t_last = self.clock.mission_time(last)  # frozen there
         t_now = self.clock.raw_mission_time(now)
-        paused_at = self._where_the_formation_stands(t_last, t_now)
+        resume = self._where_the_formation_stands(t_last, t_now)
+        paused_at = resume.at
         resumed_at = paused_at
         text = (
             f"GCS scheduler stalled {now - last:.2f} s ({t_now - t_last:.1f} s of mission "
             "time): no setpoints meanwhile, the vehicles flew on their own failsafe; "
         )
         moving = paused_at >= 0 and float(self.profile.speed_at(paused_at)) > 0
-        if t_now - paused_at > 1e-3 and moving and self._following():
-            # A standing start: the UAVs stopped near V(paused_at); a pause of one smoothing
-            # window there makes the reference stand still at its middle, then accelerate at
-            # speed / window, instead of asking them for full speed at once (DESIGN 3.5).
-            self.profile = self.profile.with_pause(paused_at, self.window_s)
-            resumed_at = paused_at + self.window_s / 2
+        if resume.pause_s > 0 and moving:
+            self.profile = self.profile.with_pause(paused_at, resume.pause_s)
+            resumed_at = resume.clock_at
         held_back = t_now - resumed_at  # negative: the inserted pause is longer than the stall
         self.clock.resume(now, resumed_at)
         self._last_awake = now
@@ -886,13 +890,18 @@ class GroundStation:
             moved = (
                 f"mission clock held back {held_back:.2f} s"
                 if held_back > 0
-                else f"mission clock set {-held_back:.2f} s ahead (a standing start)"
+                else f"mission clock set {-held_back:.2f} s ahead"
             )
-            text += f"{moved}: the formation resumes where the UAVs stand (t={paused_at:.2f} s)" + (
-                ", from a standstill" if resumed_at > paused_at else ""
-            )
+            text += f"{moved}: the formation resumes where the UAVs stand (t={paused_at:.2f} s)"
         else:
             text += "they kept up with the formation"
+        if resumed_at > paused_at:
+            speed = 1.0 - resume.pause_s / self.window_s
+            text += (
+                ", from a standstill"
+                if speed <= 0
+                else f", at {speed:.0%} of its speed (the UAVs' own)"
+            )
         self.stalls.append(Stall(last, now, t_last, paused_at, resumed_at, held_back))
         self._event(MonitorEvent(paused_at, "warning", "stall", text), now)
 
@@ -908,23 +917,38 @@ class GroundStation:
             and self.tracks[i].last_position is not None
         ]
 
-    def _where_the_formation_stands(self, t_from: float, t_to: float) -> float:
-        """The mission time in [t_from, t_to] whose virtual targets are nearest to the following
-        UAVs' latest positions (the least worst distance: the tracking error the monitor bounds);
-        `t_from` if none is following (neither the formation nor the take-offs went on
-        meanwhile), `t_to` if the formation did not move (frozen: nothing to hold back)."""
+    def _where_the_formation_stands(self, t_from: float, t_to: float) -> Resume:
+        """How the formation resumes (`gcs.flight.stall.resume_point`) at an instant from
+        `t_from` to `RESUME_LOOKAHEAD_S` past `t_to` (UAVs that carried an accelerating setpoint
+        on run ahead of the formation), matching the following UAVs' latest positions, moved on
+        to `t_to` by their velocities; at `t_from` if none is following (neither the formation
+        nor the take-offs went on meanwhile), at `t_to` if the formation did not move (frozen:
+        nothing to hold back)."""
         following = self._following()
-        count = int(np.clip(math.ceil((t_to - t_from) / 0.02) + 1, 2, 5001))
-        times = np.linspace(t_from, t_to, count)
-        distances = self.profile.distance(times)
         if not following:
-            return t_from
+            return Resume(t_from, 0.0, 0.0)
+        t_until = t_to + RESUME_LOOKAHEAD_S
+        count = int(np.clip(math.ceil((t_until - t_from) / 0.02) + 1, 3, 5001))
+        times = np.linspace(t_from, t_until, count)
+        distances = self.profile.distance(times)
         if distances[-1] - distances[0] < 1e-6:
-            return t_to
-        virtual = self._virtual(distances)[:, following]  # (count, k, 2)
-        positions = np.array([self.tracks[i].last_position[:2] for i in following])
-        worst = np.hypot(*(virtual - positions).transpose(2, 0, 1)).max(axis=1)
-        return float(times[int(np.argmin(worst))])
+            return Resume(t_to, 0.0, 0.0)
+        targets = self._virtual(distances)[:, following]  # (count, k, 2)
+        positions, velocities = [], []
+        for i in following:
+            track = self.tracks[i]
+            velocity = np.zeros(2) if track.last_velocity is None else track.last_velocity[:2]
+            age = 0.0 if track.last_sample_time is None else t_to - track.last_sample_time
+            positions.append(track.last_position[:2] + velocity * float(np.clip(age, 0.0, 0.5)))
+            velocities.append(velocity)
+        return resume_point(
+            times,
+            targets,
+            np.array(positions),
+            np.array(velocities),
+            self.window_s,
+            self.mission.vehicle.max_acceleration,
+        )
 
     def _handle_interrupts(self, now: float) -> None:
         while self._handled_interrupts < self.interrupts:

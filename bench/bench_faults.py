@@ -59,6 +59,7 @@ CASES = (
     ("forged LAND heartbeats at the GCS ports (--insecure)", 2.0, ("--insecure",), _forged_land),
     ("gcs stopped 3 s, 2x", 2.0, (), _gcs_stopped(3.0)),
     ("gcs stopped 3 s, 1x", 1.0, (), _gcs_stopped(3.0)),
+    ("gcs stopped 1 s, 1x", 1.0, (), _gcs_stopped(1.0)),
     ("a vehicle process stopped 2 s, 2x", 2.0, (), _vehicles_stopped(2.0)),
     ("a vehicle process stopped 6 s, 2x", 2.0, (), _vehicles_stopped(6.0)),
     ("a vehicle process stopped 6 s, 2x, --link-wait 30", 2.0, ("--link-wait", "30"),

@@ -1,4 +1,4 @@
-"""The faults of issue 32, flown again (`python -m bench faults`, about 8 minutes): the small
+"""The faults of issue 32, flown again (`python -m bench faults`, about 12 minutes): the small
 mission (examples/small.yaml, 4 UAVs, rho_c 5 m) with real `gcs` and `vehicles` processes
 over loopback UDP, one fault per flight, on the wall clock (`--no-lockstep`, as with real
 autopilots) unless said. Columns: the outcome (exit status, completed or the reason), the

@@ -81,6 +81,7 @@ from gcs.footprints import (
 )
 from gcs.footprints import log as footprint_log
 from gcs.geodesy import Origin, geodetic_to_enu
+from medium.pathloss import FREQUENCY_RANGE_GHZ
 from planner.formation import DISTANCE_TOLERANCE, min_radio_range
 from planner.numbers import fmt_against
 from planner.obstacles import Obstacles
@@ -98,6 +99,10 @@ PARKING = ("segment", "ray")
 #: `connectivity.rule`: the paper's disk (within radio_range), or also a chord clear of the
 #: buildings (line of sight, docs/line-of-sight.md).
 CONNECTIVITY_RULES = ("disk", "line_of_sight")
+#: `radio.buildings`: links through buildings follow 3GPP TR 38.901 UMi-Street Canyon's NLOS
+#: path loss (`true` means this one), or are all cut (the bound the planner's line-of-sight
+#: rule assumes); docs/line-of-sight.md.
+BUILDING_MODELS = ("3gpp-umi", "cut")
 #: `stations.order`: `tsp` (the planner picks the shortest tour) or `given` (as written).
 STATION_ORDERS = ("tsp", "given")
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")
@@ -259,8 +264,11 @@ class Radio:
     loss: float = 0.0
     model: str = "simple"
     calibration: Path | None = None
-    #: links whose chord meets an obstacle are cut (docs/line-of-sight.md)
-    buildings: bool = False
+    #: links whose chord meets an obstacle: None, as if there were none (the paper's disk);
+    #: a model of `BUILDING_MODELS` (docs/line-of-sight.md)
+    buildings: str | None = None
+    #: carrier frequency (GHz) of the path-loss model of `buildings`
+    frequency_ghz: float = 2.4
 
 
 @dataclass(frozen=True)
@@ -994,7 +1002,16 @@ class MissionParser:
         m = self.mapping(
             value,
             "radio",
-            ("enabled", "hop_latency_ms", "jitter_ms", "loss", "model", "calibration", "buildings"),
+            (
+                "enabled",
+                "hop_latency_ms",
+                "jitter_ms",
+                "loss",
+                "model",
+                "calibration",
+                "buildings",
+                "frequency_ghz",
+            ),  # fmt: skip
         )
         d = Radio()
         model = self.choice(m.get("model", d.model), "radio.model", RADIO_MODELS)
@@ -1009,7 +1026,27 @@ class MissionParser:
             ),
             model=model,
             calibration=self.calibration(m["calibration"], model) if "calibration" in m else None,
-            buildings=self.boolean(m.get("buildings", d.buildings), "radio.buildings"),
+            buildings=self.buildings(m.get("buildings", False)),
+            frequency_ghz=self.number(
+                m.get("frequency_ghz", d.frequency_ghz),
+                "radio.frequency_ghz",
+                low=FREQUENCY_RANGE_GHZ[0],
+                high=FREQUENCY_RANGE_GHZ[1],
+                unit="GHz",
+            ),  # fmt: skip
+        )
+
+    def buildings(self, value: Any) -> str | None:
+        """`radio.buildings`: false, true (3gpp-umi) or a model of `BUILDING_MODELS`."""
+        if value is False:
+            return None
+        if value is True:
+            return BUILDING_MODELS[0]
+        if isinstance(value, str) and value in BUILDING_MODELS:
+            return value
+        raise self.fail(
+            "radio.buildings",
+            f"true, false or one of {', '.join(BUILDING_MODELS)}, got {describe_value(value)}",
         )
 
     def calibration(self, value: Any, model: str) -> Path:

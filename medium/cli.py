@@ -29,6 +29,7 @@ from fleetwire.worldclock import WorldClockError
 from medium.calibration import DEFAULT_CALIBRATION, CalibrationTable, load_calibration
 from medium.ground_users import DEFAULT_PACKET_BYTES, DEFAULT_RATE_BPS, GroundUser
 from medium.medium import Medium, MediumConfig, MediumPortInUse, MediumUav
+from medium.pathloss import ThroughBuildings
 from medium.radio import MODELS, RadioConfig
 from vehicles.cli import InputError, _home, _integer, _Parser, _positive, _world_clock
 from vehicles.sim import DEFAULT_ORIGIN
@@ -81,14 +82,16 @@ def _ground_users(text: str) -> list[GroundUser]:
     return users
 
 
-def _buildings(path: str | None):
-    """The obstacles of `--buildings` (`planner.sight.sight_json`'s file), or None."""
+def _buildings(path: str | None, nlos_range_m: float = 0.0):
+    """What blocks links: the obstacles of `--buildings` (`planner.sight.sight_json`'s file)
+    with links through them up to `--nlos-range` kept (`medium.pathloss`), or None."""
     if path is None:
         return None
     from planner.sight import sight_from_json
 
     try:
-        return sight_from_json(json.loads(read_text_bounded(path, FOOTPRINT_BYTES)))
+        sight = sight_from_json(json.loads(read_text_bounded(path, FOOTPRINT_BYTES)))
+        return ThroughBuildings(sight, nlos_range_m)
     except (OSError, UnicodeDecodeError, FileRefused, ValueError) as exc:
         raise InputError(
             f"--buildings: expected a buildings file of the ground station: {path}: {exc}"
@@ -135,6 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="the table of --model calibrated (default: medium/calibration_ns3.json)")  # fmt: skip
     add("--buildings", metavar="FILE",
         help="links whose chord meets one of these obstacles are cut (JSON: polygons, walls)")  # fmt: skip
+    add("--nlos-range", type=_positive("--nlos-range", True), default=0.0, metavar="M",
+        help="with --buildings: links through them live up to M metres (3GPP UMi NLOS); 0: cut")  # fmt: skip
     add("--speedup", type=_positive("--speedup"), default=1.0)
     add("--home", type=_home, default=DEFAULT_ORIGIN, help="LAT,LON,ALT of local (0,0,0)")
     add("--ground-users", default="", help="'x,y[,rate_bps];...'")
@@ -179,7 +184,7 @@ def config_from_args(args: argparse.Namespace) -> MediumConfig:
             seed=args.seed,
             model=args.model,
             calibration=_calibration(args.model, args.calibration),
-            sight=_buildings(args.buildings),
+            sight=_buildings(args.buildings, args.nlos_range),
         ),
         stations=tuple(stations),
         uavs=uavs,

@@ -114,8 +114,12 @@ def chord_reach(
     most G steps apart is tested with a margin of step / 2. Any chord between two points at
     most (G - 1) step apart lies within step / 2 of a tested one (each end is within step / 2
     of a sample, and a chord is convex in its ends), so it is clear when the tested one keeps
-    that margin: the reach returned is (G - 1) step for the first G with a blocked pair."""
-    points = np.asarray(polyline, float).reshape(-1, 2)
+    that margin: the reach returned is (G - 1) step for the first G with a blocked pair.
+
+    A pair whose two samples lie on one straight piece of the polyline is not tested when
+    that piece keeps the margin: its chord is part of the piece. Only pairs round a bend are
+    (on planned paths, whose pieces keep rho_c from every building, most pairs are not)."""
+    points = _straight_runs(np.asarray(polyline, float).reshape(-1, 2))
     pieces = np.diff(points, axis=0)
     lengths = np.hypot(pieces[:, 0], pieces[:, 1])
     arcs = np.concatenate([[0.0], np.cumsum(lengths)])
@@ -123,11 +127,35 @@ def chord_reach(
     samples = np.column_stack(
         [np.interp(grid, arcs, points[:, 0]), np.interp(grid, arcs, points[:, 1])]
     )
+    margin = step / 2.0
+    piece_clear = sight.clear(points[:-1], points[1:], margin)
+    piece = np.clip(np.searchsorted(arcs, grid, side="right") - 1, 0, max(len(pieces) - 1, 0))
     most = int(np.ceil(limit / step)) + 1
     for gap in range(1, min(most, len(samples) - 1) + 1):
-        if not np.all(sight.clear(samples[:-gap], samples[gap:], step / 2.0)):
+        test = np.flatnonzero(~((piece[:-gap] == piece[gap:]) & piece_clear[piece[gap:]]))
+        if len(test) and not np.all(sight.clear(samples[test], samples[test + gap], margin)):
             return max((gap - 2) * step, 0.0)
     return float(limit)
+
+
+def _straight_runs(points: np.ndarray) -> np.ndarray:
+    """`points` without the vertices where the polyline goes straight on (and repeated ones):
+    the same curve, in as few straight pieces as it has."""
+    if len(points) < 2:
+        return points
+    keep = np.ones(len(points), bool)
+    pieces = np.diff(points, axis=0)
+    lengths = np.hypot(pieces[:, 0], pieces[:, 1])
+    keep[1:][lengths <= 0.0] = False  # repeated points
+    points, pieces = points[keep], pieces[lengths > 0.0]
+    if len(points) < 3:
+        return points
+    lengths = np.hypot(pieces[:, 0], pieces[:, 1])
+    unit = pieces / lengths[:, None]
+    cross = unit[:-1, 0] * unit[1:, 1] - unit[:-1, 1] * unit[1:, 0]
+    dot = np.einsum("ij,ij->i", unit[:-1], unit[1:])
+    straight = (np.abs(cross) < 1e-9) & (dot > 0)
+    return points[np.concatenate([[True], ~straight, [True]])]
 
 
 def sight_json(obstacles: Obstacles) -> dict:

@@ -52,6 +52,13 @@ def test_a_reduced_paper_evaluation_writes_figures_table_and_numbers(gcs_main, t
     table = (out / "table.md").read_text()
     assert table.startswith("| quantity | paper | ours | note |")
     assert "T_dv, leader UAV 2" in table and "connectivity (8 m/s)" in table
+    # the paper's formation and ours, through a radio that knows buildings (3GPP UMi)
+    paper, ours = results["buildings"]
+    assert ours["label"] == "buildings: line-of-sight formation"
+    assert ours["completed"] and ours["connected_fraction"] == 1.0
+    assert ours["los_connected_fraction"] == 1.0 and ours["uav_data"]["dropped"] == 0
+    assert paper["connected_fraction"] < 1.0  # a UAV behind the block, 50-60 m through it
+    assert "connectivity through buildings, line-of-sight formation" in table
 
 
 @pytest.mark.parametrize(

@@ -207,3 +207,15 @@ def test_every_chord_within_the_reach_is_clear_and_the_reach_is_nearly_tight():
     a, b = at(s), at(s + longer)
     assert any(shapely.LineString([p, q]).intersects(polygon) for p, q in zip(a, b, strict=True))
     assert 10.0 < reach < 60.0  # round a corner 6 m off a block: a few tens of metres
+
+
+def test_a_straight_path_is_trusted_only_where_it_clears_the_buildings_itself():
+    """Pairs on one straight piece are skipped only when the piece keeps the margin: a
+    straight path through a block has no reach; one 6 m beside it reaches the limit."""
+    from planner.sight import chord_reach
+
+    block = np.array([[20.0, 20.0], [80.0, 20.0], [80.0, 80.0], [20.0, 80.0]])
+    sight = Sight(Obstacles(polygons=[block]))
+    assert chord_reach(np.array([[0.0, 50.0], [100.0, 50.0]]), sight, 60.0) == 0.0
+    beside = np.array([[0.0, 14.0], [50.0, 14.0], [100.0, 14.0]])
+    assert chord_reach(beside, sight, 60.0) == 60.0

@@ -55,6 +55,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="medium: our radio medium only (default); ns3: also replay every "
                        "flight in ns-3 (docs/netsim.md)")  # fmt: skip
     add_ns3_options(paper)
+    paper.add_argument("--buildings", action=argparse.BooleanOptionalAction, default=True,
+                       help="also fly the paper's formation and the line-of-sight one through a "
+                       "radio that knows buildings (3GPP TR 38.901; default on)")  # fmt: skip
     paper.add_argument("--json", action="store_true", help="print results as one JSON object")
     paper.set_defaults(handler=paper_command)
     from gcs.cli import cmd_calibrate  # `gcs eval calibrate`: the live medium from ns-3
@@ -78,7 +81,15 @@ def _numbers(flag: str, text: str, kind, positive: bool = True) -> tuple:
 def paper_command(args: argparse.Namespace) -> int:
     from gcs.cli.outputs import output_folder
     from gcs.mission import load_mission
-    from gcs.sim.eval import DEFAULT_MISSION, EvalPlan, run_all, write_figures, write_results
+    from gcs.sim.eval import (
+        DEFAULT_MISSION,
+        EvalPlan,
+        buildings_runs,
+        run_all,
+        with_buildings,
+        write_figures,
+        write_results,
+    )
 
     if args.mission is None:
         args.mission = DEFAULT_MISSION
@@ -109,6 +120,9 @@ def paper_command(args: argparse.Namespace) -> int:
     began = time.perf_counter()
     progress = Console(stderr=True, highlight=False)
     runs = run_all(plan, progress=lambda label: progress.print(f"flying {label} ..."))
+    through = []
+    if args.buildings and len(mission.obstacles):
+        through = buildings_runs(plan, progress=lambda label: progress.print(f"flying {label} ..."))
     files = write_figures(runs, args.out, mission)
     network = None
     if options is not None:
@@ -120,7 +134,15 @@ def paper_command(args: argparse.Namespace) -> int:
         )
         files += ns3_paper.write_figures(replayed, args.out / "ns3")
         network = ns3_paper.summary(replayed, mission, time.perf_counter() - replay_began)
-    metrics, rows = write_results(runs, args.out, time.perf_counter() - began, plan, network)
+        if through:  # the runs through buildings, with the same footprints in ns-3
+            walled = ns3_paper.replay_in_ns3(
+                through, with_buildings(mission), options,
+                lambda label: progress.print(f"ns-3: {label} ..."),
+            )  # fmt: skip
+            network["runs"] |= ns3_paper.summary(walled, mission, 0.0)["runs"]
+    metrics, rows = write_results(
+        runs, args.out, time.perf_counter() - began, plan, network, through
+    )
     ok = all(m["completed"] and m["connected_fraction"] == 1.0 for m in metrics)
     if args.json:
         print(json.dumps({"ok": ok, "out": str(args.out), "runs": metrics}, allow_nan=False))

@@ -21,6 +21,7 @@ radio hops of its packets. Results are arrays of doubles (NaN, -1: never), copie
 """
 
 SOURCE = r"""
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -341,6 +342,159 @@ class Net
     double m_tableStart = 0, m_tableRate = 1;
     std::map<std::string, std::vector<double>> m_out;
 };
+
+// Links through buildings, exactly as the medium's `medium.pathloss.ThroughBuildings`: a
+// chord whose horizontal projection meets a footprint or a wall (touching counts) lives only
+// up to `nlosRange` metres (0: never); the channel's own model (range or log-distance) then
+// applies. Footprints are rings (x, y flat, `sizes` points each); walls are x0 y0 x1 y1.
+// (ns-3's buildings module takes boxes, not footprints: hence a model of our own.)
+class Footprints
+{
+  public:
+    Footprints(const std::vector<double>& xy, const std::vector<uint32_t>& sizes,
+               const std::vector<double>& walls)
+    {
+        size_t at = 0;
+        for (uint32_t size : sizes)
+        {
+            std::vector<double> ring(xy.begin() + 2 * at, xy.begin() + 2 * (at + size));
+            double box[4] = {1e300, 1e300, -1e300, -1e300};
+            for (uint32_t k = 0; k < size; ++k)
+            {
+                box[0] = std::min(box[0], ring[2 * k]);
+                box[1] = std::min(box[1], ring[2 * k + 1]);
+                box[2] = std::max(box[2], ring[2 * k]);
+                box[3] = std::max(box[3], ring[2 * k + 1]);
+            }
+            m_rings.push_back(ring);
+            m_boxes.push_back({box[0], box[1], box[2], box[3]});
+            at += size;
+        }
+        m_walls = walls;
+    }
+
+    bool Blocked(double ax, double ay, double bx, double by) const
+    {
+        for (size_t w = 0; w + 3 < m_walls.size(); w += 4)
+        {
+            if (Cross(ax, ay, bx, by, m_walls[w], m_walls[w + 1], m_walls[w + 2], m_walls[w + 3]))
+                return true;
+        }
+        for (size_t r = 0; r < m_rings.size(); ++r)
+        {
+            const auto& box = m_boxes[r];
+            if (std::max(ax, bx) < box[0] || std::min(ax, bx) > box[2] ||
+                std::max(ay, by) < box[1] || std::min(ay, by) > box[3])
+                continue;
+            const auto& ring = m_rings[r];
+            size_t n = ring.size() / 2;
+            if (Inside(ring, ax, ay) || Inside(ring, bx, by))
+                return true;
+            for (size_t k = 0; k < n; ++k)
+            {
+                size_t j = (k + 1) % n;
+                if (Cross(ax, ay, bx, by, ring[2 * k], ring[2 * k + 1], ring[2 * j],
+                          ring[2 * j + 1]))
+                    return true;
+            }
+        }
+        return false;
+    }
+
+  private:
+    static double Orient(double ax, double ay, double bx, double by, double cx, double cy)
+    {
+        return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
+    }
+
+    static bool Within(double a, double b, double c)
+    {
+        return std::min(a, b) <= c && c <= std::max(a, b);
+    }
+
+    // segments ab and cd meet (touching included)
+    static bool Cross(double ax, double ay, double bx, double by, double cx, double cy,
+                      double dx, double dy)
+    {
+        double d1 = Orient(cx, cy, dx, dy, ax, ay), d2 = Orient(cx, cy, dx, dy, bx, by);
+        double d3 = Orient(ax, ay, bx, by, cx, cy), d4 = Orient(ax, ay, bx, by, dx, dy);
+        if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0)))
+            return true;
+        if (d1 == 0 && Within(cx, dx, ax) && Within(cy, dy, ay)) return true;
+        if (d2 == 0 && Within(cx, dx, bx) && Within(cy, dy, by)) return true;
+        if (d3 == 0 && Within(ax, bx, cx) && Within(ay, by, cy)) return true;
+        if (d4 == 0 && Within(ax, bx, dx) && Within(ay, by, dy)) return true;
+        return false;
+    }
+
+    // strictly inside the ring (its boundary is caught by Cross)
+    static bool Inside(const std::vector<double>& ring, double x, double y)
+    {
+        bool inside = false;
+        size_t n = ring.size() / 2;
+        for (size_t k = 0, j = n - 1; k < n; j = k++)
+        {
+            double xk = ring[2 * k], yk = ring[2 * k + 1], xj = ring[2 * j], yj = ring[2 * j + 1];
+            if ((yk > y) != (yj > y) && x < (xj - xk) * (y - yk) / (yj - yk) + xk)
+                inside = !inside;
+        }
+        return inside;
+    }
+
+    std::vector<std::vector<double>> m_rings;
+    std::vector<std::array<double, 4>> m_boxes;
+    std::vector<double> m_walls;
+};
+
+class FootprintLoss : public PropagationLossModel
+{
+  public:
+    FootprintLoss(const std::vector<double>& xy, const std::vector<uint32_t>& sizes,
+                  const std::vector<double>& walls, double nlosRange)
+        : m_footprints(xy, sizes, walls),
+          m_nlosRange(nlosRange)
+    {
+    }
+
+  private:
+    double DoCalcRxPower(double txPowerDbm, Ptr<MobilityModel> a,
+                         Ptr<MobilityModel> b) const override
+    {
+        Vector pa = a->GetPosition(), pb = b->GetPosition();
+        if (std::hypot(pb.x - pa.x, pb.y - pa.y) > m_nlosRange &&
+            m_footprints.Blocked(pa.x, pa.y, pb.x, pb.y))
+            return -1000.0;
+        return txPowerDbm;
+    }
+
+    int64_t DoAssignStreams(int64_t) override
+    {
+        return 0;
+    }
+
+    Footprints m_footprints;
+    double m_nlosRange;
+};
+
+// Put a FootprintLoss in front of `channel`'s propagation loss model.
+inline void AddFootprintLoss(Ptr<YansWifiChannel> channel, const std::vector<double>& xy,
+                             const std::vector<uint32_t>& sizes, const std::vector<double>& walls,
+                             double nlosRange)
+{
+    PointerValue current;
+    channel->GetAttribute("PropagationLossModel", current);
+    Ptr<FootprintLoss> loss = Create<FootprintLoss>(xy, sizes, walls, nlosRange);
+    loss->SetNext(current.Get<PropagationLossModel>());
+    channel->SetPropagationLossModel(loss);
+}
+
+// What FootprintLoss decides for one chord (tests: the same as `planner.sight.Sight`).
+inline bool FootprintBlocked(const std::vector<double>& xy, const std::vector<uint32_t>& sizes,
+                             const std::vector<double>& walls, double ax, double ay, double bx,
+                             double by)
+{
+    return Footprints(xy, sizes, walls).Blocked(ax, ay, bx, by);
+}
 
 } // namespace fleetline_netsim
 """

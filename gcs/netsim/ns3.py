@@ -411,6 +411,48 @@ def log_distance_exponent(radio_range: float) -> float:
     return (TX_POWER_DBM - RX_THRESHOLD_DBM - REFERENCE_LOSS_DB) / (10 * math.log10(radio_range))
 
 
+def _footprint_vectors(ns, buildings: dict):
+    """`planner.sight.sight_json`'s obstacles as the C++ model's vectors: ring points (x, y
+    flat), points per ring, walls (x0, y0, x1, y1 flat)."""
+    std = ns.cppyy.gbl.std
+    rings = [np.asarray(ring, dtype=float).reshape(-1, 2) for ring in buildings["polygons"]]
+    xy = std.vector["double"]([float(v) for ring in rings for v in ring.reshape(-1)])
+    sizes = std.vector["uint32_t"]([len(ring) for ring in rings])
+    walls = std.vector["double"](
+        [float(v) for v in np.asarray(buildings["walls"], dtype=float).reshape(-1)]
+    )
+    return xy, sizes, walls
+
+
+def _add_footprint_loss(ns, channel, scenario: NetScenario) -> dict:
+    """Links through the scenario's buildings cut beyond its NLOS range, in front of the
+    channel's propagation loss (`fleetline_netsim::FootprintLoss`)."""
+    xy, sizes, walls = _footprint_vectors(ns, scenario.buildings)
+    ns.cppyy.gbl.fleetline_netsim.AddFootprintLoss(
+        channel, xy, sizes, walls, float(scenario.nlos_range_m)
+    )
+    return {
+        "footprints": len(sizes),
+        "walls": len(walls) // 4,
+        "nlos_range_m": float(scenario.nlos_range_m),
+    }
+
+
+def footprint_blocked(buildings: dict, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Whether the C++ model (`fleetline_netsim::FootprintLoss`) finds each chord
+    starts[i] -> ends[i] blocked by `buildings` (for tests against `planner.sight`)."""
+    ns = load_ns3()
+    xy, sizes, walls = _footprint_vectors(ns, buildings)
+    blocked = ns.cppyy.gbl.fleetline_netsim.FootprintBlocked
+    return np.array(
+        [
+            blocked(xy, sizes, walls, *map(float, a), *map(float, b))
+            for a, b in zip(starts, ends, strict=True)
+        ],
+        dtype=bool,
+    )
+
+
 def run_network(scenario: NetScenario, options: NetOptions = NetOptions()) -> NetResult:
     """Simulate `scenario` in ns-3 (module docstring); `NetsimUnavailable` without ns-3."""
     began = time.perf_counter()
@@ -470,7 +512,10 @@ def run_network(scenario: NetScenario, options: NetOptions = NetOptions()) -> Ne
         }
     phy.Set("TxPowerStart", ns.DoubleValue(TX_POWER_DBM))
     phy.Set("TxPowerEnd", ns.DoubleValue(TX_POWER_DBM))
-    phy.SetChannel(channel.Create())
+    yans = channel.Create()
+    if scenario.buildings is not None:
+        extra["buildings"] = _add_footprint_loss(ns, yans, scenario)
+    phy.SetChannel(yans)
     mac = ns.WifiMacHelper()
     mac.SetType("ns3::AdhocWifiMac")
     devices = wifi.Install(phy, mac, nodes)

@@ -57,6 +57,10 @@ class NetScenario:
     requests: tuple[SpeedRequest, ...]
     data_rate_bps: float = 800.0
     packet_bytes: int = 100
+    #: `radio.buildings`: the obstacles that block links (`planner.sight.sight_json`), None:
+    #: nothing; links through them live up to `nlos_range_m` (`medium.pathloss`; 0: cut)
+    buildings: dict | None = None
+    nlos_range_m: float = 0.0
 
     def __post_init__(self) -> None:
         times = np.asarray(self.times, dtype=float)
@@ -209,7 +213,18 @@ def scenario_from_fast_run(run, mission) -> NetScenario:
         radio_range=float(mission.radio_range),
         altitude=float(mission.altitude),
         requests=tuple(requests),
+        **_buildings(mission),
     )
+
+
+def _buildings(mission) -> dict:
+    """The scenario's `buildings` and `nlos_range_m` under the mission's `radio.buildings`."""
+    from gcs.sim.radio import nlos_range
+    from planner.sight import sight_json
+
+    if mission is None or not mission.radio.buildings:
+        return {}
+    return {"buildings": sight_json(mission.obstacles), "nlos_range_m": nlos_range(mission)}
 
 
 def _ground_users(mission) -> np.ndarray:
@@ -257,6 +272,7 @@ def scenario_from_recording(path: Path) -> NetScenario:
         radio_range=float(flight.radio_range),
         altitude=altitude,
         requests=tuple(_recorded_requests(flight)),
+        **_buildings(mission),
     )
 
 

@@ -114,6 +114,37 @@ def run_all(plan: EvalPlan, progress=None) -> list[EvalRun]:
     return runs
 
 
+#: The runs through a radio that knows buildings (`radio.buildings: 3gpp-umi`): (label, the
+#: mission's `connectivity.rule`): the paper's formation as the file flies it, and ours.
+BUILDING_RUNS = (
+    ("buildings: the paper's formation", "disk"),
+    ("buildings: line-of-sight formation", "line_of_sight"),
+)
+
+
+def with_buildings(mission: Mission) -> Mission:
+    """`mission` through a radio that knows its buildings (`radio.buildings: 3gpp-umi`)."""
+    return replace(mission, radio=replace(mission.radio, enabled=True, buildings="3gpp-umi"))
+
+
+def buildings_runs(plan: EvalPlan, progress=None) -> list[EvalRun]:
+    """The scenario at `plan.leader_speed` through a radio whose links through buildings
+    follow 3GPP TR 38.901 (`medium.pathloss`): planned under the paper's disk rule (its fleet
+    as the file says) and under `connectivity.rule: line_of_sight` (the fleet it needs)."""
+    base = with_buildings(load_mission(plan.mission))
+    runs = []
+    for label, rule in BUILDING_RUNS:
+        mission = replace(fixed_speed(base, plan.leader_speed), connectivity_rule=rule)
+        if rule == "line_of_sight":
+            mission = replace(mission, fleet=replace(mission.fleet, size=None))
+        if progress is not None:
+            progress(label)
+        began = time.perf_counter()
+        flown = fly_fast(plan_mission(mission, cap_speed=True), FastOptions())
+        runs.append(EvalRun(label, plan.leader_speed, None, flown, time.perf_counter() - began))
+    return runs
+
+
 @dataclass(frozen=True, eq=False)
 class PacketSeries:
     """One run's packets of one kind, in send order: the figures' input, whichever network
@@ -254,6 +285,8 @@ def run_metrics(run: EvalRun, mission: Mission) -> dict[str, Any]:
         "min_uav_obstacle_m": data["min_uav_obstacle_m"],
         "max_tracking_error_m": data["max_tracking_error_m"],
         "connected_fraction": data["radio"]["connected_fraction"],
+        "los_connected_fraction": data["los_connected_fraction"],
+        "reason": data.get("reason"),
         "uav_data": {
             "sent": int(len(times)),
             "received": int(received.sum()),
@@ -477,11 +510,13 @@ def _ms(seconds: float | None) -> str:
 
 
 def comparison(
-    metrics: list[dict], network: dict[str, dict] | None = None
+    metrics: list[dict],
+    network: dict[str, dict] | None = None,
+    buildings: list[dict] | None = None,
 ) -> list[tuple[str, str, str, str, str]]:
     """Rows (quantity, paper, ours, ns-3, note) of the table next to the paper (DESIGN 6).
     `network`: run label -> `gcs.netsim.paper.net_metrics` of that flight replayed in ns-3
-    (the ns-3 cells are empty without it)."""
+    (the ns-3 cells are empty without it); `buildings`: the metrics of `buildings_runs`."""
     by_label = {m["label"]: m for m in metrics}
     net = network or {}
     rows: list[tuple[str, str, str, str, str]] = []
@@ -599,6 +634,24 @@ def comparison(
                 "first take-off to last landing; the paper's path and fleet spacing differ",
             )
         )
+    for m in buildings or ():
+        n = net.get(m["label"])
+        rows.append(
+            (
+                f"connectivity through buildings, {m['label'].split(': ', 1)[1]}",
+                "not studied (links through walls)",
+                f"{m['fleet_size']} UAVs: {_fmt(100 * m['connected_fraction'], 1)} % of samples, "
+                f"{_fmt(100 * m['los_connected_fraction'], 1)} % by line of sight, "
+                f"{m['uav_data']['dropped']} UAV packets dropped, "
+                + ("completed" if m["completed"] else f"not completed ({m['reason']})"),
+                ""
+                if n is None
+                else f"{_fmt(_percent(n['uav_data']['ratio']), 1)} % delivered, "
+                f"{n['uav_data']['dropped']} dropped",
+                "radio.buildings: 3gpp-umi (3GPP TR 38.901 UMi-Street Canyon, docs/line-of-sight.md)"
+                + ("; ns-3: our footprint loss in front of its range model" if n else ""),
+            )
+        )
     delays = [m["uav_data"]["delay_mean_ms"] for m in metrics if m["uav_data"]["delay_mean_ms"]]
     net_delays = [n["uav_data"]["delay_mean_ms"] for n in net.values()]
     net_delays = [d for d in net_delays if d is not None]
@@ -655,15 +708,21 @@ def table_markdown(rows) -> str:
 
 
 def write_results(
-    runs: list[EvalRun], out: Path, wall_s: float, plan: EvalPlan, network: dict | None = None
+    runs: list[EvalRun],
+    out: Path,
+    wall_s: float,
+    plan: EvalPlan,
+    network: dict | None = None,
+    buildings: list[EvalRun] | None = None,
 ) -> tuple[list[dict], list[tuple[str, str, str, str, str]]]:
     """`table.md` and `results.json` in `out`; returns the per-run metrics and the rows.
     `network`: the ns-3 replay (`gcs.netsim.paper.replay_in_ns3`'s summary: "options",
     "wall_s" and "runs", label -> metrics), written as `results.json` "ns3" and as the table's
-    ns-3 column."""
+    ns-3 column; `buildings`: `buildings_runs`, written as `results.json` "buildings"."""
     mission = load_mission(plan.mission)
     metrics = [run_metrics(run, mission) for run in runs]
-    rows = comparison(metrics, None if network is None else network["runs"])
+    through = [run_metrics(run, mission) for run in buildings or ()]
+    rows = comparison(metrics, None if network is None else network["runs"], through)
     columns = ("quantity", "paper", "ours", "ns3", "note")
     out.mkdir(parents=True, exist_ok=True)
     (out / "table.md").write_text(table_markdown(rows))
@@ -678,6 +737,8 @@ def write_results(
             for row in rows
         ],
     }
+    if buildings:
+        results["buildings"] = through
     if network is not None:
         results["ns3"] = network
     (out / "results.json").write_text(json.dumps(results, indent=1, allow_nan=False))

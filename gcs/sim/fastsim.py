@@ -34,14 +34,13 @@ from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, NullRecorder, RunOptions, RunResult
 from gcs.link import MemoryLink
 from gcs.planning import MissionPlan, plan_json
-from gcs.sim.radio import run_json_radio
+from gcs.sim.radio import buildings_sight, run_json_radio
 from gcs.summary import run_json
 from medium.ground_users import DEFAULT_PACKET_BYTES, GroundUser
 from medium.medium import MediumModel
 from medium.radio import DelayLine, RadioConfig
 from planner.guarantees import GuaranteeSamples, check_positions
 from planner.kinematics import LineFormation, SpeedProfile
-from planner.sight import Sight
 from vehicles.autopilot import AutopilotConfig
 from vehicles.dynamics import Airframe, Disturbances, DynamicsConfig
 from vehicles.fleet_speed import LeaderRequest
@@ -217,7 +216,7 @@ def radio_config(mission) -> RadioConfig:
         calibration=load_calibration(radio.calibration or DEFAULT_CALIBRATION)
         if calibrated
         else None,
-        sight=Sight(mission.obstacles) if radio.buildings else None,
+        sight=buildings_sight(mission),
     )
 
 

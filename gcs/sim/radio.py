@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from gcs.sim.children import start_child
-from planner.sight import sight_json
+from medium.pathloss import ThroughBuildings, nlos_range_m
+from planner.sight import Sight, sight_json
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +50,8 @@ class MediumSetup:
     calibration: Path | None = None  # the table of "calibrated" (None: the medium's own)
     #: `radio.buildings`: what blocks a link (`planner.sight.sight_json`), None: nothing
     buildings: dict | None = None
+    #: links through buildings live up to this long (`medium.pathloss`; 0: all cut)
+    nlos_range_m: float = 0.0
 
 
 def medium_setup(mission) -> MediumSetup | None:
@@ -68,7 +71,24 @@ def medium_setup(mission) -> MediumSetup | None:
         model=radio.model,
         calibration=radio.calibration,
         buildings=sight_json(mission.obstacles) if radio.buildings else None,
+        nlos_range_m=nlos_range(mission),
     )
+
+
+def nlos_range(mission) -> float:
+    """How long a link through buildings may be under the mission's `radio.buildings` model
+    (`medium.pathloss`, at the mission's altitude): 0 when every one is cut."""
+    radio = mission.radio
+    if radio.buildings != "3gpp-umi":
+        return 0.0
+    return nlos_range_m(mission.radio_range, radio.frequency_ghz, mission.altitude)
+
+
+def buildings_sight(mission):
+    """What the radio of `mission` is blocked by (`medium.radio.LineOfSight`), None: nothing."""
+    if not mission.radio.buildings:
+        return None
+    return ThroughBuildings(Sight(mission.obstacles), nlos_range(mission))
 
 
 def model_args(setup: MediumSetup) -> list[str]:
@@ -123,6 +143,8 @@ class MediumProcess:
             json.dump(setup.buildings, self._buildings)
             self._buildings.close()
             extra_args = ("--buildings", self._buildings.name, *extra_args)
+            if setup.nlos_range_m > 0:
+                extra_args = ("--nlos-range", f"{setup.nlos_range_m:.6g}", *extra_args)
         cmd = [
             sys.executable, "-m", "medium.cli",
             "--count", str(len(vehicle_ports)),

@@ -13,6 +13,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import yaml
 from rich.console import Console
 from rich.table import Table
@@ -20,6 +21,8 @@ from rich.table import Table
 from bench.machine import reference_seconds
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
+from planner.formation import radio_spacing
+from planner.sight import Sight
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 MISSIONS = ("small.yaml", "table-ii.yaml", "city-blocks.yaml", "helsinki-centre.yaml")
@@ -34,6 +37,28 @@ def _variant(source: Path, folder: Path, rule: str) -> Path:
     for footprints in source.parent.glob("*.geojson"):
         (folder / footprints.name).write_bytes(footprints.read_bytes())
     return path
+
+
+def chain_estimate(formation, sight: Sight, limit: float, step: float = 2.0) -> int:
+    """The fewest hops of a chain along the formation's path from A to B, each a clear chord
+    (margin 0) at most `limit` long between path points `step` apart: what an elastic
+    formation (or relays) would need at the instant its chain spans the whole path, dynamics
+    ignored (DESIGN's greedy-chain estimate, made exact on the samples by a shortest path).
+    Comparable to eq. 28's ceil(length / spacing)."""
+    points = formation.path
+    arcs = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+    grid = np.append(np.arange(0.0, arcs[-1], step), arcs[-1])
+    samples = np.column_stack([np.interp(grid, arcs, points[:, k]) for k in (0, 1)])
+    count, gaps = len(samples), int(np.ceil(limit / step)) + 1
+    hops = np.full(count, np.inf)
+    hops[0] = 0.0
+    for j in range(1, count):
+        i = np.arange(max(0, j - gaps), j)
+        ends = np.repeat(samples[j][None], len(i), axis=0)
+        ok = (np.hypot(*(ends - samples[i]).T) <= limit) & sight.clear(samples[i], ends)
+        if ok.any():
+            hops[j] = hops[i[ok]].min() + 1
+    return int(hops[-1]) if np.isfinite(hops[-1]) else -1
 
 
 def _planned(path: Path, runs: int = 3):
@@ -51,7 +76,7 @@ def main() -> None:
     table = Table(title=f"line of sight (R = {unit:.2f} s)")
     for column in (
         "mission", "eq. 28", "disk: LOS share", "rigid fleet (reach m)", "corners m",
-        "spacing m", "LOS fleet", "path disk / LOS m", "duration disk / LOS s",
+        "spacing m", "LOS fleet", "chain: shortest / LOS path", "path disk / LOS m", "duration disk / LOS s",
         "planning disk / LOS s", "in R", "LOS / disk",
     ):  # fmt: skip
         table.add_column(column, justify="left" if column == "mission" else "right")
@@ -60,6 +85,7 @@ def main() -> None:
             disk, disk_s = _planned(_variant(EXAMPLES / name, Path(folder), "disk"))
             sight, sight_s = _planned(_variant(EXAMPLES / name, Path(folder), "line_of_sight"))
             c, w = disk.connectivity, sight.connectivity
+            limit = radio_spacing(disk.mission.safety_margin, disk.mission.radio_range)
             table.add_row(
                 name,
                 str(c.eq28_fleet_size),
@@ -68,6 +94,10 @@ def main() -> None:
                 f"{w.corner_margin_m:g}",
                 f"{w.spacing_m:g}",
                 str(sight.fleet_size),
+                " / ".join(
+                    str(chain_estimate(p.formation, Sight(p.mission.obstacles), limit))
+                    for p in (disk, sight)
+                ),
                 f"{disk.path_plan.length_m:.0f} / {sight.path_plan.length_m:.0f}",
                 f"{disk.duration_s:.0f} / {sight.duration_s:.0f}",
                 f"{disk_s:.3f} / {sight_s:.3f}",

@@ -43,8 +43,8 @@ def chain_estimate(formation, sight: Sight, limit: float, step: float = 2.0) -> 
     """The fewest hops of a chain along the formation's path from A to B, each a clear chord
     (margin 0) at most `limit` long between path points `step` apart: what an elastic
     formation (or relays) would need at the instant its chain spans the whole path, dynamics
-    ignored (DESIGN's greedy-chain estimate, made exact on the samples by a shortest path).
-    Comparable to eq. 28's ceil(length / spacing)."""
+    ignored (the greedy-chain estimate of docs/design.md 10, made exact on the samples by a shortest
+    path). Comparable to eq. 28's ceil(length / spacing)."""
     points = formation.path
     arcs = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
     grid = np.append(np.arange(0.0, arcs[-1], step), arcs[-1])

@@ -2,7 +2,7 @@
 
     .venv/bin/python examples/generate.py   (from the repository root)
 
-* `table-ii.yaml`: the paper's Table II scenario (DESIGN 6) from `planner.scenarios`
+* `table-ii.yaml`: the paper's Table II scenario (docs/design.md 6) from `planner.scenarios`
   (10 axis-aligned rectangles of random size in the 2000 m x 2000 m area, clear of A, B and
   their parking rows), with a seed that puts two of them across the straight line A->B so
   that the path has to bend; 6 ground users in the open.
@@ -70,7 +70,7 @@ def table_ii_yaml(seed: int) -> str:
         "  backend: sim",
         "vehicle:",
         "  max_speed: 15",
-        "  max_acceleration: 8    # 10 m/s is safe at this path's bends from about 7 (DESIGN 3.5)",
+        "  max_acceleration: 8    # 10 m/s is safe at this path's bends from about 7 (docs/design.md 3.5)",
         "  radius: 0.5",
         "obstacles:",
     ]

@@ -1,4 +1,4 @@
-"""The fleet's MAVLink conventions (CONTRACTS.md, MAVLink): the ground station's identity, the
+"""The fleet's MAVLink conventions (docs/outputs.md, MAVLink): the ground station's identity, the
 mission-time value, the setpoint type masks, and the speed-change command's encoding."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-#: The ground station's MAVLink identity (CONTRACTS.md: the GCS is system 255).
+#: The ground station's MAVLink identity (docs/outputs.md: the GCS is system 255).
 GCS_SYSTEM_ID = 255
 GCS_COMPONENT_ID = mavlink.MAV_COMP_ID_MISSIONPLANNER  # 190
 
@@ -45,7 +45,7 @@ IGNORE_ACCELERATION = (
 IGNORE_YAW = (
     mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 )
-#: Position + velocity (CONTRACTS.md: accepted by both real autopilots).
+#: Position + velocity (docs/outputs.md: accepted by both real autopilots).
 MASK_POSITION_VELOCITY = IGNORE_ACCELERATION | IGNORE_YAW  # 3520
 #: Position + velocity + acceleration feed-forward.
 MASK_POSITION_VELOCITY_ACCELERATION = IGNORE_YAW  # 3072

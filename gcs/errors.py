@@ -1,14 +1,14 @@
 """Bad-input errors: one line naming the file, the key (or flag) and what is expected.
 
 Every refusal of a mission file or of a command-line value raises `InputError`; the CLI
-prints `str(error)` on one line to stderr and exits with status 2 (CONTRACTS.md).
+prints `str(error)` on one line to stderr and exits with status 2 (docs/cli.md).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-#: Exit status for bad input (CONTRACTS.md).
+#: Exit status for bad input (docs/cli.md).
 EXIT_BAD_INPUT = 2
 
 

@@ -1,7 +1,7 @@
 """Local east-north-up frame <-> WGS84 through the mission origin (pymap3d).
 
-The mission's local frame (CONTRACTS.md) has x east, y north in metres and altitudes above the
-origin; `Origin` anchors it on the WGS84 ellipsoid. Conversions are vectorised over arrays.
+The mission's local frame (docs/mission-file.md) has x east, y north in metres and altitudes above
+the origin; `Origin` anchors it on the WGS84 ellipsoid. Conversions are vectorised over arrays.
 ENU -> WGS84 is `fleetwire.geodesy` (pymap3d's closed form without its per-call overhead: the
 core converts every tick's setpoints), shared with the simulated vehicles.
 """

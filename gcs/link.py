@@ -6,7 +6,7 @@ starts a thread. Each datagram received and each message sent is handed, raw byt
 decoded message, to an optional `capture` callback (the recorder's `/mavlink/<n>/rx|tx`).
 
 A link is *alive* while any valid MAVLink message arrives from the expected system id
-(CONTRACTS.md, MAVLink), not only heartbeats: `last_valid_time` is the wall-clock time of the
+(docs/outputs.md, MAVLink), not only heartbeats: `last_valid_time` is the wall-clock time of the
 last such message.
 """
 
@@ -28,7 +28,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 
 from fleetwire.frames import newest_telemetry  # noqa: E402
 
-# The ground station's MAVLink identity (CONTRACTS.md: the GCS is system 255): the fleet's.
+# The ground station's MAVLink identity (docs/outputs.md: the GCS is system 255): the fleet's.
 from fleetwire.messages import GCS_COMPONENT_ID, GCS_SYSTEM_ID  # noqa: E402
 
 log = logging.getLogger(__name__)
@@ -70,7 +70,7 @@ class LinkCounters:
 
 class _Liveness:
     """What every link keeps of what it receives: counters, the system ids heard, and the time
-    of the last valid message of the expected system (CONTRACTS.md: a link is alive while any
+    of the last valid message of the expected system (docs/outputs.md: a link is alive while any
     valid message arrives from that system id)."""
 
     def __init__(self, url: str, system_id: int) -> None:

@@ -1,7 +1,7 @@
-"""Mission file (YAML, version 1, CONTRACTS.md) -> a validated, frozen `Mission`.
+"""Mission file (YAML, version 1, docs/mission-file.md) -> a validated, frozen `Mission`.
 
-Everything CONTRACTS.md lists as refused is refused here with `InputError` (file, 0-based key
-path, what is expected, on one line), except the checks that need the planned path's fleet
+Everything docs/mission-file.md lists as refused is refused here with `InputError` (file, 0-based
+key path, what is expected, on one line), except the checks that need the planned path's fleet
 size (fixed size below the minimum of eq. 28, leader outside 1..N, connection count, length
 of a `sim.battery_mah` list, parking rows vs obstacles and each other, eqs. 14-15):
 `gcs.planning` makes those, naming the key too.
@@ -18,7 +18,7 @@ Defaults (every key not listed as required is optional):
 * `start.theta_deg`, `goal.theta_deg`: 0 (rows aligned with A->B).
 * `parking`: `segment` (rows as long as the fleet needs; `ray` is the paper's infinite rays).
 * `speed.initial`: `speed.max`; `speed.changes`: none; `speed.cap_to_safe`: false (a
-  `speed.max` above the safe formation speed is refused instead of capped, DESIGN 3.5).
+  `speed.max` above the safe formation speed is refused instead of capped, docs/design.md 3.5).
   A change's `leader` is a 1-based UAV number; `at` is the effective mission time, or for a
   leader's request the time the leader sends it.
 * `fleet`: `{size: auto, backend: sim, connections: []}`.
@@ -336,13 +336,14 @@ class Mission:
 
     @property
     def error_budget(self) -> float:
-        """Smoothing error allowed at bends: rho_c minus the tracking allowance (DESIGN 3.5)."""
+        """Smoothing error allowed at bends: rho_c minus the tracking allowance
+        (docs/design.md 3.5)."""
         return self.safety_margin - self.vehicle.tracking_allowance
 
 
 def load_mission(path: str | Path, *, check_clearance: bool = True) -> Mission:
-    """Read and validate a mission file; raise `InputError` on anything CONTRACTS.md refuses.
-    `check_clearance=False` skips only the test that A and B keep safety_margin from every
+    """Read and validate a mission file; raise `InputError` on anything docs/mission-file.md
+    refuses. `check_clearance=False` skips only the test that A and B keep safety_margin from every
     obstacle (to suggest where they could go instead)."""
     path = Path(path)
     text, data = read_yaml(path, "a mission file")
@@ -1221,7 +1222,7 @@ class MissionParser:
         safety_margin: float,
     ) -> None:
         """A and B (and each station) must lie outside every obstacle and its safety margin
-        (DESIGN 3.2)."""
+        (docs/design.md 3.2)."""
         if len(obstacles) == 0:
             return
         point = shapely.Point(pose.x, pose.y)

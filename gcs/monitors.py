@@ -8,7 +8,7 @@ Fatal (an event, and the run's exit status becomes 1):
 
 Warnings only (the plan reaches them by design): UAV-UAV below 2 rho_c, UAV-obstacle below
 rho_c. A condition is reported when it starts, not at every sample, and again only after it
-cleared. Distances are horizontal (CONTRACTS.md, run JSON); the sampled checks are the
+cleared. Distances are horizontal (docs/outputs.md, run JSON); the sampled checks are the
 planner's (`planner.guarantees.check_positions`), so the run, the log report and the plan
 measure the same thing.
 """
@@ -66,7 +66,8 @@ class SafetyStats:
 
 
 class SafetyMonitor:
-    """Tracking errors and distances from sampled positions (the paper's D_min, DESIGN 5)."""
+    """Tracking errors and distances from sampled positions (the paper's D_min,
+    docs/design.md 5)."""
 
     def __init__(
         self,
@@ -242,7 +243,7 @@ class SafetyMonitor:
 
 
 class LinkMonitor:
-    """Link loss (CONTRACTS.md: alive while any valid message arrives from the system id)."""
+    """Link loss (docs/outputs.md: alive while any valid message arrives from the system id)."""
 
     def __init__(self, fleet_size: int, link_timeout_s: float = 3.0) -> None:
         self.link_timeout_s = link_timeout_s

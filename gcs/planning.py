@@ -1,12 +1,12 @@
 """Mission -> MissionPlan: the planned path, the line formation, the speed profile, safe speed.
 
 The glue between the mission file and the pure planner. It also makes the refusals that need
-the plan (CONTRACTS.md), each naming its key: a fixed `fleet.size` below the minimum of eq. 28,
-a `leader` outside 1..N, a number of `fleet.connections` or of `sim.battery_mah` different from
-N, parking rows too close to an obstacle or to each other (eqs. 14-15), and a `speed.max` above
-the highest formation speed the path's bends allow (DESIGN 3.5) unless capping is asked for.
+the plan (docs/mission-file.md), each naming its key: a fixed `fleet.size` below the minimum of
+eq. 28, a `leader` outside 1..N, a number of `fleet.connections` or of `sim.battery_mah` different
+from N, parking rows too close to an obstacle or to each other (eqs. 14-15), and a `speed.max` above
+the highest formation speed the path's bends allow (docs/design.md 3.5) unless capping is asked for.
 
-Safe speed (DESIGN 3.5): the virtual targets turn corners instantly; a vehicle with
+Safe speed (docs/design.md 3.5): the virtual targets turn corners instantly; a vehicle with
 acceleration limit `vehicle.max_acceleration` following a smoothed reference deviates at a bend
 by a smoothing error that grows with the speed. The error budget for that smoothing is
 `safety_margin - vehicle.tracking_allowance` (the allowance, by default 30 % of the margin, is
@@ -122,7 +122,7 @@ class MissionPlan:
     smoothing_window_s: float | None
     smoothing_error_m: float | None
     planning_time_s: float
-    route: RoutePlan | None = None  # stations missions (DESIGN 7)
+    route: RoutePlan | None = None  # stations missions (docs/design.md 7)
     connectivity: Connectivity | None = None  # A -> B missions with a formation
 
     @property
@@ -487,7 +487,7 @@ def _unflown(
 
 def _flown(invalid: MissionPlan, formation: LineFormation, cap_speed: bool) -> MissionPlan:
     """`invalid` completed for `formation`: the safe speed (refused above it unless capping),
-    the duration, the smoothing window and its error bound (DESIGN 3.5)."""
+    the duration, the smoothing window and its error bound (docs/design.md 3.5)."""
     mission, speeds, profile = invalid.mission, invalid.speeds, invalid.profile
     safe = float(safe_speed(formation, mission.vehicle.max_acceleration, mission.error_budget))
     capped = False
@@ -499,7 +499,7 @@ def _flown(invalid: MissionPlan, formation: LineFormation, cap_speed: bool) -> M
                 f"at most the safe formation speed {fmt_against(safe, speeds.max)} m/s that the "
                 "path's bends allow "
                 f"with vehicle.max_acceleration {mission.vehicle.max_acceleration:g} m/s^2 and "
-                f"a smoothing budget of {mission.error_budget:.3g} m (DESIGN 3.5), got "
+                f"a smoothing budget of {mission.error_budget:.3g} m (docs/design.md 3.5), got "
                 f"{fmt_against(speeds.max, safe, 6)}; lower it, raise vehicle.max_acceleration, or set "
                 "speed.cap_to_safe: true (--cap-speed)",
             )
@@ -525,7 +525,7 @@ def _flown(invalid: MissionPlan, formation: LineFormation, cap_speed: bool) -> M
 def route_problem(
     mission: Mission, method: str = "exact", gap_tolerance: float = 0.0
 ) -> RouteProblem:
-    """The planner's route problem for a stations mission (DESIGN 7); `gap_tolerance` ends
+    """The planner's route problem for a stations mission (docs/design.md 7); `gap_tolerance` ends
     each leg's certification as `PathProblem.gap_tolerance` does."""
     return RouteProblem(
         start=mission.start.xy,
@@ -621,7 +621,7 @@ def check_rows(mission: Mission, problem: PathProblem, rows: ParkingRows, fleet_
 
 
 def plan_json(plan: MissionPlan) -> dict[str, Any]:
-    """The plan JSON of CONTRACTS.md (full precision), plus diagnostics; strict JSON values."""
+    """The plan JSON of docs/outputs.md (full precision), plus diagnostics; strict JSON values."""
     pp = plan.path_plan
     mission = plan.mission
     rows = pp.rows

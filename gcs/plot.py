@@ -1,7 +1,7 @@
 """The plan figure: the map (paper figs. 6-7) and distance travelled per UAV (fig. 3).
 
 Left: candidate edges (faint), obstacles and their rho_c margins (mitre corners, square caps on
-walls, as the graph nodes of DESIGN 3.1 assume), parking rows and slots, base stations, A/B,
+walls, as the graph nodes of docs/design.md 3.1 assume), parking rows and slots, base stations, A/B,
 ground users and the chosen path. Right: the distance each UAV has travelled against time,
 sampled from the line formation's virtual targets V_n(t) (eq. 27).
 """

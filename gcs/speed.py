@@ -1,4 +1,5 @@
-"""Time-stamped speed changes (DESIGN 4): who may ask, when they take effect, who acknowledged.
+"""Time-stamped speed changes (docs/design.md 4): who may ask, when they take effect, who
+acknowledged.
 
 A change is (effective mission time, new speed, sequence number). The formation's speed
 profile changes at the effective time for every UAV at once (`SpeedProfile.with_change`), so
@@ -11,8 +12,8 @@ Requests come from the mission's schedule (`at` is the effective time; broadcast
 from the operator (`gcs speed V [--at T]` over `OperatorSocket`, or typed in the live view), and
 from a UAV acting as leader (effective = arrival of its request + the lead time). The lead time
 is the smallest advance every UAV can honour: at least half the smoothing window (the reference
-at t looks w/2 ahead, DESIGN 3.5), at least twice the worst reaction time seen so far, and at
-least `min_lead_s`.
+at t looks w/2 ahead, docs/design.md 3.5), at least twice the worst reaction time seen so far,
+and at least `min_lead_s`.
 
 `OperatorSocket` is a Unix stream socket next to the run's log (`<log>.sock`, owner-only); one
 JSON line in, one JSON line out. A speed change (`gcs speed`): `{"speed": 5, "at": 120}` (`at`
@@ -118,7 +119,7 @@ class SpeedChanges:
 
     @property
     def lead_s(self) -> float:
-        """Smallest advance of an effective time over the request (DESIGN 4)."""
+        """Smallest advance of an effective time over the request (docs/design.md 4)."""
         return max(self.window_s / 2, 2 * self.worst_reaction_s, self.min_lead_s)
 
     def earliest(self, now_s: float) -> float:

@@ -1,6 +1,6 @@
-"""The run's summary: the run JSON of CONTRACTS.md and the human table (rich).
+"""The run's summary: the run JSON of docs/outputs.md and the human table (rich).
 
-Run JSON fields (CONTRACTS.md), all times in mission seconds:
+Run JSON fields (docs/outputs.md), all times in mission seconds:
 * `completed`: every UAV landed on its arrival slot, nothing aborted, no safety bound broken;
 * `fleet_size`; `duration_s`: from the first take-off to the last landing;
 * `min_uav_uav_m`, `min_uav_obstacle_m`: horizontal, over every UAV (parked ones included),
@@ -34,7 +34,7 @@ EXIT_COMPLETED, EXIT_ABORTED = 0, 1
 
 
 def exit_status(result: RunResult) -> int:
-    """0 completed; 1 aborted or a safety bound broken (CONTRACTS.md)."""
+    """0 completed; 1 aborted or a safety bound broken (docs/cli.md)."""
     return EXIT_COMPLETED if result.completed and not result.fatal else EXIT_ABORTED
 
 
@@ -93,7 +93,7 @@ def run_json(result: RunResult, log_path: str, safety_margin: float) -> dict[str
             if e.level in ("error", "warning")
         ],
     }
-    if result.radio is not None:  # the radio medium ran (CONTRACTS.md)
+    if result.radio is not None:  # the radio medium ran (docs/outputs.md)
         out["radio"] = result.radio
     if result.stations is not None:
         out["stations"] = stations_json(result.stations)
@@ -282,8 +282,8 @@ def _design(measured: float | None, uavs: int, result: RunResult, safety_margin:
     """What the design promises a flown distance, or that it promised nothing. The virtual
     targets keep `uavs` x rho_c (rho_c from obstacles, 2 rho_c between two UAVs), and each of
     the `uavs` UAVs involved strays from its target by at most the run's largest tracking error,
-    so the distance stays above their difference (DESIGN 3.4-3.5). Flying a corner at rho_c, a
-    UAV is inside the margin by design. The promise assumes every tracking error below rho_c:
+    so the distance stays above their difference (docs/design.md 3.4-3.5). Flying a corner at rho_c,
+    a UAV is inside the margin by design. The promise assumes every tracking error below rho_c:
     when one reached it, or the `measured` distance is below the promise, the promise did not
     hold, and the line says why and since when."""
     target_m = uavs * safety_margin

@@ -1,5 +1,5 @@
 """Counters of the emulated radio (pure): packets sent, received and dropped, delays, hops,
-connectivity samples; the `radio` object of the run JSON (CONTRACTS.md) and the paper's
+connectivity samples; the `radio` object of the run JSON (docs/outputs.md) and the paper's
 network metrics (sec. V-A: BS_con, T_BS, S_r-d) come from here.
 
 Packet kinds: `uplink` (MAVLink from a UAV to the ground station), `downlink` (MAVLink from the
@@ -142,7 +142,7 @@ class RadioStats:
         return total
 
     def summary(self) -> dict:
-        """The run JSON's `radio` object (CONTRACTS.md) plus per-kind and per-UAV detail."""
+        """The run JSON's `radio` object (docs/outputs.md) plus per-kind and per-UAV detail."""
         ground = self.counters["ground"]
         return {
             "connected_fraction": (self.connected_samples / self.samples if self.samples else None),

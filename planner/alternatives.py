@@ -4,7 +4,7 @@ Numbers in, numbers out (no files, no clock). For a `PathProblem` that `precheck
 refuses for its rows, `suggest` finds the nearest accepted theta_A (theta_B kept), the nearest
 accepted theta_B (theta_A kept) and, when neither alone is accepted, the nearest accepted pair;
 with a radius, also the nearest start point (or goal point, when B is refused) whose margin and
-rows are accepted. Rows are sized for the fleet size the refusal was made for (DESIGN 3.2).
+rows are accepted. Rows are sized for the fleet size the refusal was made for (docs/design.md 3.2).
 
 The angle search goes outward from the requested angle both ways, 1 degree at a time over
 the whole turn (every candidate row built and tested at once against the obstacles' STRtree),

@@ -9,9 +9,9 @@ import numpy as np
 
 SQRT2 = math.sqrt(2.0)
 
-#: Comparison tolerance on distances, metres (DESIGN 3.2).
+#: Comparison tolerance on distances, metres (docs/design.md 3.2).
 DISTANCE_TOLERANCE = 1e-6
-#: Comparison tolerance on angles, radians (DESIGN 3.2).
+#: Comparison tolerance on angles, radians (docs/design.md 3.2).
 ANGLE_TOLERANCE = 1e-9
 
 
@@ -68,7 +68,7 @@ class ParkingRows:
     With parking "segment" each row is as long as N UAVs need, (N-1) dS_c, plus rho_c;
     with "ray" (the paper's reading) they are effectively infinite.
 
-    Legs of a route (`planner.route`, DESIGN 7) generalise both: `start_row` may be a
+    Legs of a route (`planner.route`, docs/design.md 7) generalise both: `start_row` may be a
     polyline, the route flown so far from the leg's start back to A and on along Delta_A (its
     first piece is the previous leg's last segment, e_0 its direction), and `open_goal`
     means no row beyond the goal (`goal_row` is then the point B twice) and no arrival
@@ -97,7 +97,8 @@ def parking_rows(
     safety_margin: float,
     parking: str = "segment",
 ) -> ParkingRows:
-    """Parking rows for `fleet_size` UAVs (DESIGN 3.2: finite rows unless `parking == "ray"`)."""
+    """Parking rows for `fleet_size` UAVs (docs/design.md 3.2: finite rows unless
+    `parking == "ray"`)."""
     start = np.asarray(start, float)
     goal = np.asarray(goal, float)
     e0 = row_direction(start, goal, start_angle_deg)

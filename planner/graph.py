@@ -1,5 +1,5 @@
-"""Graph nodes (paper sec. IV-B1, eqs. 39-40; DESIGN 3.1) and lazily built edges (def. 5;
-DESIGN 3.2).
+"""Graph nodes (paper sec. IV-B1, eqs. 39-40; docs/design.md 3.1) and lazily built edges (def. 5;
+docs/design.md 3.2).
 
 Nodes: A, B; for each obstacle segment C_i D_i four points rho_c beyond each end along the
 segment and rho_c to either side (eq. 39, with the erratum: the D rows use D_i); A+-, B+- at
@@ -74,7 +74,7 @@ COLLINEAR_SHARE = 0.01
 
 @dataclass(frozen=True, eq=False)
 class Nodes:
-    """Graph nodes (DESIGN 3.1). Index 0 is A, 1 is B.
+    """Graph nodes (docs/design.md 3.1). Index 0 is A, 1 is B.
 
     `anchor` is the obstacle corner (segment end) a node goes round and `cone` the directions
     of the two mitre-rectangle edges that meet at the node (they span the obstacle side);
@@ -112,7 +112,7 @@ def graph_nodes(problem: PathProblem) -> Nodes:
         [np.cos(ab + offsets), np.sin(ab + offsets)]
     )
     if problem.start_tail is not None:
-        # A leg's start (DESIGN 7): the route behind it is a wall kept 2 rho_c away, so it
+        # A leg's start (docs/design.md 7): the route behind it is a wall kept 2 rho_c away, so it
         # gets nodes as a segment end does (eq. 39 with 2 rho_c: beyond it at +-45 degrees)
         # and beside it (a turn of 90 degrees, so that a leg can turn back in open space).
         e0 = row_direction(start, goal, problem.start_angle_deg)
@@ -131,7 +131,7 @@ def graph_nodes(problem: PathProblem) -> Nodes:
     u = u / np.hypot(u[:, 0], u[:, 1])[:, None]
     n = np.column_stack([u[:, 1], -u[:, 0]])  # right-hand normal
     pts, anchors, cones = [], [], []
-    for side in (1.0, -1.0):  # eq. 39: C+-, D+- (D rows use D_i: DESIGN erratum)
+    for side in (1.0, -1.0):  # eq. 39: C+-, D+- (D rows use D_i: docs/design.md 3.1 erratum)
         pts += [c - rho * u + side * rho * n, d + rho * u + side * rho * n]
         anchors += [c, d]
         cones += [np.stack([u, -side * n], axis=1), np.stack([-u, -side * n], axis=1)]
@@ -271,9 +271,9 @@ def segments_clear_of_rows(
     rows: RowGeometry,
     safety_margin: float,
 ) -> np.ndarray:
-    """Def. 5 / eq. 35 with the DESIGN 3.2 erratum: a segment not starting at A keeps
+    """Def. 5 / eq. 35 with the docs/design.md 3.2 erratum: a segment not starting at A keeps
     2 rho_c from Delta_A, a segment not ending at B keeps 2 rho_c from Delta_B. A leg's
-    first segment keeps 2 rho_c from its start tail beyond the first piece (DESIGN 7)."""
+    first segment keeps 2 rho_c from its start tail beyond the first piece (docs/design.md 7)."""
     ok = np.ones(len(starts), bool)
     if len(starts) == 0:
         return ok
@@ -317,8 +317,8 @@ def parking_angles_ok(
 
 def edge_ok(problem: PathProblem, rows, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
     """Definition 5 for segments starts[k] -> ends[k] (each (k, 2)), vectorised: clear of every
-    obstacle by rho_c, of the rows by 2 rho_c (erratum of DESIGN 3.2) and within 90 degrees of
-    the parking directions at A and B. `rows` is a `ParkingRows`."""
+    obstacle by rho_c, of the rows by 2 rho_c (erratum of docs/design.md 3.2) and within 90 degrees
+    of the parking directions at A and B. `rows` is a `ParkingRows`."""
     starts = np.asarray(starts, float).reshape(-1, 2)
     ends = np.asarray(ends, float).reshape(-1, 2)
     rho = problem.safety_margin

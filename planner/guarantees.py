@@ -1,4 +1,5 @@
-"""Sampled checks of the paper's guarantees (theorems 3-5, objectives 1-3; DESIGN 3.4 and 5).
+"""Sampled checks of the paper's guarantees (theorems 3-5, objectives 1-3; docs/design.md 3.4
+and 5).
 
 From positions of N UAVs at T instants (virtual targets now, flown tracks later) compute, per
 sample: the smallest horizontal UAV-UAV distance (theorem 4 promises >= 2 rho_c for the virtual

@@ -1,4 +1,5 @@
-"""Line-formation kinematics (paper sec. IV-A, eqs. 16-28) and the smoothed reference (DESIGN 3.5).
+"""Line-formation kinematics (paper sec. IV-A, eqs. 16-28) and the smoothed reference
+(docs/design.md 3.5).
 
 The commanded speed v(t) is piecewise constant (`SpeedProfile`); S(t) is the distance it makes a
 non-stopping UAV travel (eq. 19) and Phi(s) its inverse (eqs. 20-22). A `LineFormation` turns a
@@ -18,7 +19,7 @@ The paper's L_{K+2} (everyone parked) is the same for all UAVs: `total_distance`
 path segments P_k P_{k+1}, e_K along the goal row away from B; between thresholds k and k+1 the
 UAV moves along e_k.
 
-Where we differ from the paper's text (see DESIGN 3.4):
+Where we differ from the paper's text (see docs/design.md 3.4):
 
 * parking slots carry the dS_c factor that eq. 17 omits (eq. 27 has it);
 * eq. 27's sum stops at k = K: its k = K+1 term is the final wait and moves nothing;
@@ -28,13 +29,13 @@ Where we differ from the paper's text (see DESIGN 3.4):
   extended by the two rows; this is eq. 27 rewritten, and the tests compare it with the literal
   sum of ramps.
 
-The smoothed reference (DESIGN 3.5) is the moving average of V_n(t) over [t - w/2, t + w/2],
+The smoothed reference (docs/design.md 3.5) is the moving average of V_n(t) over [t - w/2, t + w/2],
 computed in closed form (V_n is piecewise linear in t, its average piecewise quadratic), with
 velocity and acceleration as its exact derivatives. Its deviation from V_n is bounded by
 `smoothing_error_bound`; `safe_speed` and `recommended_window` size speed and window from the
 vehicle's acceleration limit and the error budget (the model is in `safe_speed`'s docstring).
 Computing the reference at t needs the profile up to t + w/2: speed changes must be announced
-at least w/2 ahead (DESIGN 4).
+at least w/2 ahead (docs/design.md 4).
 
 Monitoring-station formations (`LineFormation.stations`, use case 1): the path is the route
 A -> P_1 -> ... -> P_m (no parking row at its end) and UAV n holds at s_n, a distance along the
@@ -150,7 +151,7 @@ class SpeedProfile:
         """This profile with the formation stopped for `length_s` from `at_s` (>= 0): speed 0,
         then the speed it had, every later stretch `length_s` later. The smoothed reference of
         a pause as long as the smoothing window stands still at its middle and then
-        accelerates at speed / window (DESIGN 3.5): a standing start."""
+        accelerates at speed / window (docs/design.md 3.5): a standing start."""
         if not (math.isfinite(at_s) and at_s >= 0 and math.isfinite(length_s) and length_s > 0):
             raise ValueError(f"pause: need at >= 0 and length > 0, not {at_s}, {length_s}")
         keep = self.times < at_s
@@ -627,7 +628,7 @@ class LineFormation:
         return thresholds, np.where(new_group[..., None], jumps, 0.0)
 
 
-# ----- smoothed reference (DESIGN 3.5) -----------------------------------------------------
+# ----- smoothed reference (docs/design.md 3.5) ---------------------------------------------
 
 
 @dataclass(frozen=True, eq=False)
@@ -773,7 +774,7 @@ class _JumpSteps:
 
     Built from every contiguous range of kinks (per row) spanning at most `radius`; M is the
     running maximum of the ranges' vector sums sorted by span, a right-continuous step
-    function. The reference's acceleration is that sum divided by the window (DESIGN 3.5).
+    function. The reference's acceleration is that sum divided by the window (docs/design.md 3.5).
     """
 
     def __init__(self, positions: np.ndarray, jumps: np.ndarray, radius: float) -> None:
@@ -820,7 +821,7 @@ def _unit_kinks(formation_or_path) -> tuple[np.ndarray, np.ndarray]:
 def smoothing_error_bound(
     formation: LineFormation, profile: SpeedProfile, window_s: float
 ) -> float:
-    """Upper bound of |smoothed reference - V_n(t)| over all t and n, metres (DESIGN 3.5).
+    """Upper bound of |smoothed reference - V_n(t)| over all t and n, metres (docs/design.md 3.5).
 
     V_n(t) is piecewise linear in t; the moving average over a window w deviates from it by
     sum_i dv_i g(t - t_i) with dv_i the velocity jump at kink t_i and
@@ -947,8 +948,8 @@ def recommended_window(speed: float, max_acceleration: float, formation_or_path=
 def safe_speed(formation_or_path, max_acceleration: float, error_budget: float) -> float:
     """Highest constant formation speed whose smoothed reference meets a_max and the budget, m/s.
 
-    Model (DESIGN 3.5): the reference is the moving average of V_n over a window w. A velocity
-    jump |dv| smoothed over w costs |dv| w / 8 of position error and needs |dv| / w of
+    Model (docs/design.md 3.5): the reference is the moving average of V_n over a window w. A
+    velocity jump |dv| smoothed over w costs |dv| w / 8 of position error and needs |dv| / w of
     acceleration, so the smallest error under a_max is |dv|^2 / (8 a_max), with
     |dv| = 2 v sin(theta/2) at a bend of theta (90 degrees at 10 m/s with a_max = 5: 5 m) and
     |dv| = v at a start or stop. Kinks closer than the window add up: in the error each

@@ -1,5 +1,5 @@
-"""Relief of one UAV on a monitoring-station chain (use case 1, paper sec. III-C1; DESIGN 7):
-a UAV about to be discharged goes home while the others keep the chain to A.
+"""Relief of one UAV on a monitoring-station chain (use case 1, paper sec. III-C1;
+docs/design.md 7): a UAV about to be discharged goes home while the others keep the chain to A.
 
 The UAVs hold on stations along one route; a UAV cannot fly home along it in the chain's
 layer without passing the UAVs between it and A. So, from the hold (every UAV on station):

@@ -1,4 +1,4 @@
-"""One route through monitoring stations (DESIGN 7, the paper's use case 1, sec. III-C1).
+"""One route through monitoring stations (docs/design.md 7, the paper's use case 1, sec. III-C1).
 
 The fleet leaves its parking row at A and visits static points P_1 .. P_m in the order of
 `planner.stations.visit_order`; the route A -> P_1 -> ... -> P_m is ONE path that meets
@@ -16,7 +16,7 @@ between any two non-consecutive segments, of the same leg or not. That is what t
   rest, as for A -> B.
 * the stations s_n of `planner.stations.station_layout` give the fleet size N; the parking
   row sized for N is part of every leg's tail, so the legs are planned again while N grows
-  (N only grows, as for A -> B, DESIGN 3.2).
+  (N only grows, as for A -> B, docs/design.md 3.2).
 
 Each leg is the shortest valid one given the route before it (`certified` says so for every
 leg); the route as a whole is not proven shortest (a shorter leg now may force a longer one
@@ -190,7 +190,7 @@ def _direction_deg(vector: np.ndarray) -> float:
 def plan_route(
     problem: RouteProblem, progress: Callable[[SearchProgress], bool] | None = None
 ) -> RoutePlan:
-    """Plan the route through every point (DESIGN 7), or say which point cannot be reached
+    """Plan the route through every point (docs/design.md 7), or say which point cannot be reached
     and why. `progress` is passed to every leg's search (see `plan_path`).
 
     With `order="tsp"` and at most `EXACT_POINTS` points, a visiting order whose route breaks

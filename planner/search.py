@@ -1,5 +1,5 @@
-"""Path search (paper sec. IV-B4, Algorithm 1, eqs. 42-47; DESIGN 3.3), the fleet-size
-iteration of finite parking rows (DESIGN 3.2) and the diagnosis when no valid path exists.
+"""Path search (paper sec. IV-B4, Algorithm 1, eqs. 42-47; docs/design.md 3.3), the fleet-size
+iteration of finite parking rows (docs/design.md 3.2) and the diagnosis when no valid path exists.
 
 `method="exact"` (default):
 1. A* with a Euclidean heuristic over *directed edges* (state = the last edge). A transition
@@ -13,8 +13,8 @@ iteration of finite parking rows (DESIGN 3.2) and the diagnosis when no valid pa
 2. If that walk still breaks condition (5) or repeats a point (definition 1), a label search
    enumerates partial walks in order of length (at most `_LABELS_PER_STATE` per directed
    edge), extending one only if the simplified path stays valid: the next-shortest walks of
-   DESIGN 3.3, invalid prefixes pruned. It returns the shortest valid path, or proves there is
-   none when no edge ran out of labels.
+   docs/design.md 3.3, invalid prefixes pruned. It returns the shortest valid path, or proves there
+   is none when no edge ran out of labels.
 3. This runs first on the taut graph (`planner.graph`). Its answer is certified shortest when
    its length equals the shortest walk that keeps the parking rows and angles (no other
    constraint binds); otherwise the
@@ -29,7 +29,7 @@ iteration of finite parking rows (DESIGN 3.2) and the diagnosis when no valid pa
 
 `method="penalty"`: the paper's loop, done properly: Dijkstra (A*) over nodes, then weights of
 offending edges grow by (violations they take part in) x (mean edge weight), eq. 46 counting
-the bends over 90 degrees and proximity between non-adjacent segments only (DESIGN 3.3
+the bends over 90 degrees and proximity between non-adjacent segments only (docs/design.md 3.3
 errata); at most `max_penalty_iterations` rounds, on the full graph without pruning.
 
 Everything is capped by `max_expansions` (states taken off a queue, over every round, graph
@@ -86,11 +86,11 @@ __all__ = [
     "precheck_issue",
 ]
 
-#: Graphs with more candidate targets than 4x this use radius queries (DESIGN: scale): the
+#: Graphs with more candidate targets than 4x this use radius queries (docs/design.md: scale): the
 #: taut graph (used first) and the full graph (the fallback, with more but flatter nodes).
 LOCAL_CANDIDATES = 250
 LOCAL_CANDIDATES_FULL = 150
-#: Repair search: partial walks kept per directed edge (DESIGN 3.3, next-shortest walks).
+#: Repair search: partial walks kept per directed edge (docs/design.md 3.3, next-shortest walks).
 _LABELS_PER_STATE = 8
 #: The repair search runs the heuristic's reverse search on once it has taken this many
 #: labels per node the reverse search has settled (`GoalDistance.extend`).
@@ -703,7 +703,7 @@ def _walk_points(cache: EdgeCache, walk: list[int]) -> tuple[np.ndarray, np.ndar
 
 
 def _offences(violations: PathViolations, segments: int) -> np.ndarray:
-    """Eq. 46 with the DESIGN 3.3 errata, per segment: non-adjacent segments closer than
+    """Eq. 46 with the docs/design.md 3.3 errata, per segment: non-adjacent segments closer than
     2 rho_c, plus adjacent bends over 90 degrees; anything else also counts once."""
     count = np.zeros(segments)
     if len(violations.proximity):
@@ -749,7 +749,7 @@ def _exact_level(
     explain: bool = False,
 ) -> _LevelResult:
     """Shortest walk meeting (1)-(4); if it breaks (5) or repeats a point, the label search
-    for the shortest valid path (DESIGN 3.3). With `bound`, only paths shorter than it.
+    for the shortest valid path (docs/design.md 3.3). With `bound`, only paths shorter than it.
     When the walk search's short-edge rule left no walk, there is no valid path either
     ("exhausted"); with `explain` (the search whose failure is diagnosed) the walks without
     that rule are searched too, so that the reason names condition (5) when it is the one."""
@@ -899,7 +899,7 @@ def _explain(problem: PathProblem, culprit: str) -> str:
     "bends", "departure", "arrival", "both" (the angles at both ends), "rows" or
     "unreachable" (the obstacles alone)."""
     theta_a, theta_b = problem.start_angle_deg, problem.goal_angle_deg
-    leg = problem.start_tail is not None  # a leg of a route (planner.route, DESIGN 7)
+    leg = problem.start_tail is not None  # a leg of a route (planner.route, docs/design.md 7)
     if culprit == "bends":
         return (
             "every route from A to B needs a bend sharper than 90 degrees (condition 4 of "
@@ -1316,7 +1316,7 @@ def plan_path(
 
     With finite rows ("segment"), N starts at the straight-line bound (or the given fleet
     size), and the path is planned again while it needs more UAVs than the rows were sized
-    for (N only grows, DESIGN 3.2). `fleet_size` is the N the rows are sized for (at least
+    for (N only grows, docs/design.md 3.2). `fleet_size` is the N the rows are sized for (at least
     the requested size), `min_fleet_size` eq. 28 for the path found.
     """
     rho, radio = problem.safety_margin, problem.radio_range

@@ -114,7 +114,8 @@ def chord_reach(
     most G steps apart is tested with a margin of step / 2. Any chord between two points at
     most (G - 1) step apart lies within step / 2 of a tested one (each end is within step / 2
     of a sample, and a chord is convex in its ends), so it is clear when the tested one keeps
-    that margin: the reach returned is (G - 1) step for the first G with a blocked pair.
+    that margin: the reach returned is (G - 1) step for the largest G whose pairs all keep
+    it (the first gap with a blocked pair, less one).
 
     A pair whose two samples lie on one straight piece of the polyline is not tested when
     that piece keeps the margin: its chord is part of the piece. Only pairs round a bend are

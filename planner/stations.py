@@ -1,10 +1,10 @@
-"""Monitoring stations (use case 1, paper sec. III-C1; DESIGN 7): the order in which the fleet
-visits the points, and where along the route A -> P_1 -> ... -> P_m each UAV stops.
+"""Monitoring stations (use case 1, paper sec. III-C1; docs/design.md 7): the order in which the
+fleet visits the points, and where along the route A -> P_1 -> ... -> P_m each UAV stops.
 
-Stations are distances along the route from A (DESIGN 7, "Stations"): s_1 > s_2 > ... > s_N,
+Stations are distances along the route from A (docs/design.md 7, "Stations"): s_1 > s_2 > ... > s_N,
 consecutive ones at least dS_c and at most dS_r apart, dS_c <= s_N <= dS_r (the chain reaches
 the base station at A), every point exactly on one station, N the fewest UAVs allowing this.
-Distances carry the `DISTANCE_TOLERANCE` of DESIGN 3.2.
+Distances carry the `DISTANCE_TOLERANCE` of docs/design.md 3.2.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ __all__ = [
     "visit_orders",
 ]
 
-#: Largest number of points whose route `visit_order` finds exactly (DESIGN 7).
+#: Largest number of points whose route `visit_order` finds exactly (docs/design.md 7).
 EXACT_POINTS = 8
 #: Seed of the annealing for more points: equal inputs give equal routes.
 TSP_SEED = 0
@@ -41,7 +41,7 @@ def route_length(start: np.ndarray, points: np.ndarray, order: np.ndarray) -> fl
 
 
 def visit_order(start: np.ndarray, points: np.ndarray, order: str = "tsp") -> np.ndarray:
-    """Indices into `points` in visiting order (DESIGN 7, "Order").
+    """Indices into `points` in visiting order (docs/design.md 7, "Order").
 
     "given": the list's order. "tsp": the shortest open route from A through every point
     (ending anywhere, straight-line distances): exact for m <= EXACT_POINTS (every permutation,
@@ -157,7 +157,7 @@ class StationError(ValueError):
 
 @dataclass(frozen=True, eq=False)
 class StationLayout:
-    """Stations of UAVs 1..N (DESIGN 7): `stations[n - 1]` is s_n, metres along the route,
+    """Stations of UAVs 1..N (docs/design.md 7): `stations[n - 1]` is s_n, metres along the route,
     decreasing; `holders[i]` is the UAV (1-based) holding point i (visiting order);
     `relays[n - 1]` is True when UAV n holds no point."""
 
@@ -178,7 +178,7 @@ def station_layout(
     radio_range: float,
     fleet_size: int | None = None,
 ) -> StationLayout:
-    """Stations for points at `point_distances` along the route (increasing; DESIGN 7).
+    """Stations for points at `point_distances` along the route (increasing; docs/design.md 7).
 
     Gap i runs from d_{i-1} to d_i (d_0 = 0, at A) and gets c_i = ceil(g_i / dS_r) stations,
     at least one, evenly spaced and ending on d_i (a tolerance keeps an exact multiple of dS_r

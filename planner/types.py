@@ -71,8 +71,8 @@ class PathProblem:
             raise ValueError(f"fleet_size must be >= 1, not {self.fleet_size}")
 
     def rows(self, fleet_size: int) -> ParkingRows:
-        """The rows the path must respect for `fleet_size` UAVs (DESIGN 3.2; a leg's start
-        tail and open goal, DESIGN 7)."""
+        """The rows the path must respect for `fleet_size` UAVs (docs/design.md 3.2; a leg's start
+        tail and open goal, docs/design.md 7)."""
         rows = parking_rows(
             self.start,
             self.goal,

@@ -1,6 +1,6 @@
 """Definition 4 (valid path, conditions (1)-(5), eqs. 34-38) and the row conditions (eqs. 14-15).
 
-Every comparison carries the explicit tolerances of DESIGN 3.2: distances may fall short by
+Every comparison carries the explicit tolerances of docs/design.md 3.2: distances may fall short by
 `DISTANCE_TOLERANCE` (1e-6 m), angles may exceed 90 degrees by `ANGLE_TOLERANCE` (1e-9 rad).
 """
 
@@ -120,7 +120,8 @@ def _angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def check_path(path: np.ndarray, problem: PathProblem, rows: ParkingRows) -> PathViolations:
     """Conditions (1)-(5) of definition 4 (eqs. 34-38) for `path` (K, 2), A..B, with the
-    DESIGN 3.2 erratum on (2) (the Delta_A test skips the first segment, Delta_B the last)."""
+    docs/design.md 3.2 erratum on (2) (the Delta_A test skips the first segment, Delta_B the
+    last)."""
     path = np.asarray(path, float).reshape(-1, 2)
     rho = problem.safety_margin
     structure: list[str] = []
@@ -156,7 +157,7 @@ def check_path(path: np.ndarray, problem: PathProblem, rows: ParkingRows) -> Pat
     # (2) eq. 35 with the erratum.
     limit = 2.0 * rho - DISTANCE_TOLERANCE
     # A leg's start row is the route behind it: its first segment keeps 2 rho_c from the
-    # tail beyond the previous segment (condition 5 across legs, DESIGN 7).
+    # tail beyond the previous segment (condition 5 across legs, docs/design.md 7).
     start_row = _row_breaches(lines, shapely.LineString(rows.start_row), limit, range(1, count))
     if rows.start_rest is not None:
         first = _row_breaches(lines, shapely.LineString(rows.start_rest), limit, range(1))

@@ -261,7 +261,7 @@ def test_check_names_the_accepted_angle_on_the_refusal_line(gcs_main, refused):
 
 def test_check_near_names_a_start_point_and_json_keeps_stdout_empty(gcs_main, refused):
     code, out, err = gcs_main("mission", "check", refused, "--near", "10", "--json")
-    assert code == 2 and out == ""  # exit 2: no plan JSON (CONTRACTS.md)
+    assert code == 2 and out == ""  # exit 2: no plan JSON (docs/cli.md)
     (line,) = err.splitlines()
     assert "accepted instead: theta_A = " in line and ", or start at (" in line
     assert line.endswith(" m from A")

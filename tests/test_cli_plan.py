@@ -55,7 +55,7 @@ def assert_refused(result, path: Path) -> None:
 def test_corpus_is_large_enough():
     assert len(BAD) >= 25
     keys = {expectation(p)[0] for p in BAD}
-    # Every refusal of CONTRACTS.md has a file naming its key (see each file's comment).
+    # Every refusal of docs/mission-file.md has a file naming its key (see each file's comment).
     for key in (
         "",  # unreadable / non-YAML / root not a mapping
         "speeed",  # unknown key

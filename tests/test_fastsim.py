@@ -1,6 +1,6 @@
 """The fast in-process mode: a whole mission in lockstep, through the radio medium model.
 
-The small mission completes connected, with the run JSON of CONTRACTS.md (and its `radio`
+The small mission completes connected, with the run JSON of docs/outputs.md (and its `radio`
 object); latency grows with the hop count; every UAV receives every speed change, the leader's
 too; two runs with the same seed are identical; a fleet forced too small is cut off; a UAV
 given a small battery (`sim.battery_mah`) reports less of it left.

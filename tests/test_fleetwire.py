@@ -1,4 +1,4 @@
-"""What both ends of the wire agree on (`fleetwire`), pinned to the numbers CONTRACTS.md and the
+"""What both ends of the wire agree on (`fleetwire`), pinned to the numbers docs/outputs.md and the
 autopilots' documentation give: the one place these numbers are typed by hand."""
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def wire(msg):
 
 def test_a_speed_change_decodes_to_what_was_encoded():
     params = messages.encode_speed_change(7.5, 123_400, 3)
-    assert params == (1.0, 7.5, -1.0, 0.0, 123_400, 3, 0.0)  # CONTRACTS.md: param1 1, x, y
+    assert params == (1.0, 7.5, -1.0, 0.0, 123_400, 3, 0.0)  # docs/outputs.md: param1 1, x, y
     msg = mavlink.MAVLink_command_int_message(
         1, 1, messages.SPEED_CHANGE_FRAME, messages.SPEED_CHANGE_COMMAND, 0, 0, *params
     )

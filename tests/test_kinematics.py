@@ -1,4 +1,4 @@
-"""Line-formation kinematics (paper sec. IV-A) and the smoothed reference (DESIGN 3.5)."""
+"""Line-formation kinematics (paper sec. IV-A) and the smoothed reference (docs/design.md 3.5)."""
 
 from __future__ import annotations
 
@@ -467,7 +467,7 @@ def test_smoothing_error_stays_within_the_bound(path, profile, window):
 
 
 def test_safe_speed_for_a_90_degree_bend_is_the_design_example():
-    # DESIGN 3.5: a 90-degree bend at 10 m/s with a_max = 5 costs 5 m.
+    # docs/design.md 3.5: a 90-degree bend at 10 m/s with a_max = 5 costs 5 m.
     bend = [[0, 0], [1000, 0], [1000, 1000]]
     assert safe_speed(np.array(bend, float), 5.0, 5.0) == pytest.approx(10.0, rel=1e-6)
     formation = aligned_formation(bend, fleet_size=3, rho_r=220.0)

@@ -40,7 +40,7 @@ MISSION = REPO / "examples" / "small.yaml"
 SPEEDUP = str(flight_speedup(5))  # lower on a busy machine (tests/flying.py)
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
-#: Topics every UAV has, and the fleet-wide ones (CONTRACTS.md, MCAP; gcs.logs.recording).
+#: Topics every UAV has, and the fleet-wide ones (docs/outputs.md, MCAP; gcs.logs.recording).
 UAV_TOPICS = ("/uav{n}/fix", "/uav{n}/target", "/uav{n}/setpoint", "/uav{n}/state",
               "/mavlink/{n}/rx", "/mavlink/{n}/tx")  # fmt: skip
 FLEET_TOPICS = ("/plan", "/scene", "/tf", "/events", "/speed", "/metrics", "/fleet",

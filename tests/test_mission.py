@@ -68,7 +68,7 @@ def test_minimal_mission_gets_the_documented_defaults(tmp_path):
 
 
 def test_contract_example_keys_are_all_accepted(tmp_path):
-    """The mission file of CONTRACTS.md, key for key (noise spelt as documented)."""
+    """The mission file of docs/mission-file.md, key for key (noise spelt as documented)."""
     (tmp_path / "buildings.geojson").write_text(
         json.dumps(feature_collection([square_lonlat(LYON, 800, 800, 30)]))
     )

@@ -31,7 +31,7 @@ SETTINGS = dict(
 
 
 def independent_violations(path: np.ndarray, pb: PathProblem, rows) -> list:
-    """Definition 4 (with the DESIGN 3.2 erratum), written directly from the paper."""
+    """Definition 4 (with the docs/design.md 3.2 erratum), written directly from the paper."""
     errors: list = []
     pts = np.asarray(path, float)
     if len(pts) < 2 or not (np.allclose(pts[0], pb.start) and np.allclose(pts[-1], pb.goal)):
@@ -82,7 +82,7 @@ def check_plan(plan, pb: PathProblem) -> None:
         spacing = pb.radio_range - 2 * pb.safety_margin
         assert plan.min_fleet_size == max(1, math.ceil(length / spacing - 1e-6))
         assert plan.fleet_size >= max(plan.min_fleet_size, pb.fleet_size or 1)
-        if pb.parking == "segment":  # the rows are sized for the fleet (DESIGN 3.2)
+        if pb.parking == "segment":  # the rows are sized for the fleet (docs/design.md 3.2)
             row = math.dist(*plan.rows.start_row)
             assert math.isclose(row, (plan.fleet_size - 1) * 2 * math.sqrt(2) * RHO + RHO)
     else:

@@ -1,5 +1,5 @@
-"""Graph nodes (DESIGN 3.1), edges (def. 5, DESIGN 3.2) and the search (DESIGN 3.3) on
-hand-made maps, including the diagnosis when no valid path exists."""
+"""Graph nodes (docs/design.md 3.1), edges (def. 5, docs/design.md 3.2) and the search
+(docs/design.md 3.3) on hand-made maps, including the diagnosis when no valid path exists."""
 
 from __future__ import annotations
 
@@ -386,7 +386,7 @@ def test_paper_scenario_path_is_valid_and_bends():
     plan = plan_path(scenario_problem(sc))
     assert_valid(plan, scenario_problem(sc))
     assert len(plan.path) >= 3
-    assert plan.fleet_size in (4, 5)  # DESIGN 6: eq. 28 gives 4-5 UAVs for this map
+    assert plan.fleet_size in (4, 5)  # docs/design.md 6: eq. 28 gives 4-5 UAVs for this map
     assert plan.candidate_edges.shape[1:] == (2, 2) and len(plan.candidate_edges) > 0
 
 

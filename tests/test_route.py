@@ -1,4 +1,4 @@
-"""Routes through monitoring stations (DESIGN 7): one path meeting definition 4 as a whole,
+"""Routes through monitoring stations (docs/design.md 7): one path meeting definition 4 as a whole,
 stations for the fewest UAVs, refusals naming the point. Checked by an independent checker of
 definition 4 written here (numpy and shapely distances, not the planner's own check)."""
 

@@ -1,4 +1,5 @@
-"""Speed changes (DESIGN 4): effective times, refusals, the schedule, the operator socket."""
+"""Speed changes (docs/design.md 4): effective times, refusals, the schedule, the operator
+socket."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""Monitoring stations (DESIGN 7): every layout `station_layout` returns keeps the station rules,
-checked here from the rules themselves, with the fewest UAVs found by an independent dynamic
+"""Monitoring stations (docs/design.md 7): every layout `station_layout` returns keeps the station
+rules, checked here from the rules themselves, with the fewest UAVs found by an independent dynamic
 programme; every refusal is confirmed infeasible by it. `visit_order` is checked against brute
 force and the nearest-neighbour route."""
 
@@ -51,7 +51,7 @@ def fewest_stations(gap: float, dsc: float, dsr: float) -> int | None:
 
 
 def rule_breaches(layout: StationLayout, d: np.ndarray, dsc: float, dsr: float) -> list:
-    """The station rules of DESIGN 7, one by one."""
+    """The station rules of docs/design.md 7, one by one."""
     s, n = layout.stations, layout.fleet_size
     errors = []
     if len(s) != n or len(layout.relays) != n or len(layout.holders) != len(d):

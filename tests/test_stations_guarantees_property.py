@@ -1,4 +1,4 @@
-"""Theorems 3-5 for monitoring stations (DESIGN 7), sampled: on random maps with 1-8 points,
+"""Theorems 3-5 for monitoring stations (docs/design.md 7), sampled: on random maps with 1-8 points,
 the route planned through them and its stations, flown with eq. 27 capped at each station,
 held, and flown home (the return decided at a random formation distance, during the hold or
 before everyone is on station), keeps every sampled instant at least 2 rho_c between UAVs,

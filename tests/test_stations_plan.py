@@ -1,4 +1,4 @@
-"""Planning a stations mission through the ground station (DESIGN 7): the plan JSON's
+"""Planning a stations mission through the ground station (docs/design.md 7): the plan JSON's
 `stations` block, the summary, the plot and the Foxglove scene, and the refusals that need the
 route (an unreachable point, a fixed fleet too small for the stations), each one line with
 exit 2 naming its key."""

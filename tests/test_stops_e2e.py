@@ -26,7 +26,13 @@ pytestmark = [
     pytest.mark.timeout(300),
 ]
 
-SPEEDUP = flight_speedup(2)
+#: 1.5, not 2: the vehicle process is stopped as soon as the test reads the formation's resume
+#: line, so the wall-clock delay of that read (long on a loaded machine) lands the stop later in
+#: the resume's acceleration, in mission time. Stopped while accelerating, UAVs 3 and 4 fly
+#: their last setpoints on by themselves when the process resumes (their own failsafe) and
+#: overshoot their held targets: 7.5 m once at 2x with three test runs on two cores; none in
+#: six quiet runs at 2x, nor at 1x quiet and 1.5x beside a CPU hog.
+SPEEDUP = flight_speedup(1.5)
 RHO_C = 5.0  # the small mission's safety margin
 #: (what, wall seconds stopped, a line that says the fleet flies on again afterwards)
 STOPS = (

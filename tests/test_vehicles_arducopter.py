@@ -3,7 +3,7 @@ time (no sockets): the simulated autopilot behaves as ArduCopter 4.7 there. Armi
 STABILIZE, guided targets (position targets never time out, velocity targets do, ArduCopter's
 type-mask reading), the mission protocol and AUTO, MAVFTP refused at once, the parameter list,
 SYS_STATUS's geofence bits, reboot, CONDITION_YAW, and the honest refusals. The ArduCopter facts
-are cited where each is tested (shared/sitl transcripts or the ArduPilot source file)."""
+are cited where each is tested (tests/sitl transcripts or the ArduPilot source file)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Mission clock, recorded fleet speed changes and a leader's speed requests (pure, no I/O).
 
-Contract with the ground station (CONTRACTS.md, MAVLink section, and DESIGN 4; the messages are
-encoded and decoded by ``fleetwire.messages``, shared with the ground station):
+Contract with the ground station (docs/outputs.md, MAVLink section, and docs/design.md 4; the
+messages are encoded and decoded by ``fleetwire.messages``, shared with the ground station):
 
 * **Mission time.** The GCS tells each vehicle its mission clock with ``NAMED_VALUE_INT``
   ``name = "MSN_TIME"``, ``value`` = the GCS's mission time in milliseconds *when it sends the

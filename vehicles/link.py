@@ -1,11 +1,11 @@
 """One simulated vehicle's MAVLink 2 link over UDP: its socket, its codec and its peers.
 
 The vehicle listens on its own UDP port (``udpin``) and sends to the last peer that sent it a
-valid MAVLink message (CONTRACTS.md: "replying to the last sender"), plus, when given, a fixed
-``out`` address (``udpout``, e.g. QGroundControl on 14550). The messages of one control tick go
-out together, several MAVLink frames per datagram. Every received datagram is parsed on its own
-(a truncated datagram never corrupts the next one); anything that is not valid MAVLink is
-counted and dropped.
+valid MAVLink message (docs/cli.md, vehicles sim: "answers whoever sent it the last valid message"),
+plus, when given, a fixed ``out`` address (``udpout``, e.g. QGroundControl on 14550). The messages
+of one control tick go out together, several MAVLink frames per datagram. Every received datagram is
+parsed on its own (a truncated datagram never corrupts the next one); anything that is not valid
+MAVLink is counted and dropped.
 
 :func:`make_codec` is the one place where a vehicle's pymavlink codec is created; MAVLink 2
 signing is ``vehicles.signing`` (``VehicleLink.signing``).

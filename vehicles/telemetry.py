@@ -41,7 +41,7 @@ CAPABILITIES = (
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
 )
-#: SYS_STATUS words of ArduCopter 4.7 SITL ready to fly (shared/sitl ardupilot-session.jsonl:
+#: SYS_STATUS words of ArduCopter 4.7 SITL ready to fly (tests/sitl ardupilot-session.jsonl:
 #: present 0x5371fc2f, enabled 0x5361fc2f, health 0x4771fc2f, plus PREARM_CHECK when armable).
 ARDUCOPTER_SENSORS_PRESENT = 0x5371FC2F
 ARDUCOPTER_SENSORS_ENABLED = 0x5361FC2F

@@ -3,8 +3,8 @@
 Starts ``python -m vehicles sim`` as a real subprocess on free UDP ports, talks to a vehicle
 with pymavlink's ``mavutil`` exactly as a GCS would (system 255, component 190, heartbeats at
 1 Hz of simulated time), waits on conditions with deadlines (never on sleeps), and generates a
-moving-average-smoothed reference along a polyline (DESIGN 3.5) with velocity and acceleration
-feed-forward. Not used by the simulation itself.
+moving-average-smoothed reference along a polyline (docs/design.md 3.5) with velocity
+and acceleration feed-forward. Not used by the simulation itself.
 """
 
 from __future__ import annotations
@@ -374,7 +374,7 @@ class SmoothedPath:
     """A polyline flown at constant speed, smoothed by a moving average of width ``window_s``.
 
     ``sample(t)`` returns the smoothed position, its velocity and acceleration (the
-    feed-forward a GCS sends, DESIGN 3.5); before t = 0 and after the end it rests at the
+    feed-forward a GCS sends, docs/design.md 3.5); before t = 0 and after the end it rests at the
     first and last point.
     """
 

@@ -8,7 +8,7 @@ top only what planning needs anyway (the mission, the planner, rich); the flight
 (pymavlink, drivers, core), MCAP and matplotlib are imported inside the handlers that use
 them (tests/test_startup.py checks `gcs mission plan` imports none of them).
 
-Exit statuses (CONTRACTS.md): 0 success, 1 the command ran and failed (no valid path, mission
+Exit statuses (docs/cli.md): 0 success, 1 the command ran and failed (no valid path, mission
 aborted...), 2 bad input. Bad input (`InputError`, argparse usage errors) is one line on
 stderr, never a traceback.
 """

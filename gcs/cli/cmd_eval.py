@@ -1,7 +1,7 @@
 """`gcs eval paper [--out DIR] [--network ns3]`: the paper's network evaluation in the fast mode
 (`gcs.sim.eval`), its flights optionally replayed in ns-3 as well (`gcs.netsim.paper`).
 
-Exit statuses (CONTRACTS.md): 0 every run completed with its fleet connected the whole
+Exit statuses (docs/cli.md): 0 every run completed with its fleet connected the whole
 mission, 1 otherwise (the figures and the table are written either way), 2 bad input (or
 `--network ns3` without the ns3 extra).
 """

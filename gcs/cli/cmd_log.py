@@ -1,5 +1,5 @@
 """`gcs log info|report|replay|netsim LOG`: summarise, figure, re-emit a recording, or replay its
-flight in the ns-3 network simulator (CONTRACTS.md, docs/netsim.md).
+flight in the ns-3 network simulator (docs/cli.md, docs/netsim.md).
 
 Exit statuses: 0 done (a truncated recording is read up to its cut, and said so), 2 bad input
 (not an MCAP file, not a recording of `gcs mission run`, a bad flag; for `netsim`, ns-3 not

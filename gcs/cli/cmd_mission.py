@@ -246,7 +246,7 @@ def check_command(args: argparse.Namespace) -> int:
         plan = plan_from_args(args)
     except InputError as refused:
         # A refused parking row (eqs. 14-15) or A/B in a margin: say what would be accepted,
-        # on the same line (exit 2 stays one line on stderr and nothing on stdout, CONTRACTS).
+        # on the same line (exit 2 stays one line on stderr and nothing on stdout, docs/cli.md).
         rows = isinstance(refused, RowsRefused)
         placed = refused.key_path in ("start", "goal") and near is not None
         if not (rows or placed) or refused.file != str(args.file):

@@ -2,7 +2,7 @@
 
 Over the same socket as `gcs speed` (`<log>.sock`; without `--socket` or `--log`, the newest
 under `./logs/`). UAV N climbs above the chain, flies home above the route and lands on a
-start-row slot, while the UAVs left close the gap. Exit statuses (CONTRACTS.md): 0 accepted
+start-row slot, while the UAVs left close the gap. Exit statuses (docs/cli.md): 0 accepted
 (prints the effective time and the landing slot), 1 refused or no mission running, 2 bad input.
 """
 

@@ -3,7 +3,7 @@
 Over the same socket as `gcs speed` (`<log>.sock`; without `--socket` or `--log`, the newest
 under `./logs/`). The mission stops the formation at the effective time (the earliest a
 speed change may have, or `--at` if later), then every UAV flies its way out backwards to its
-start slot and lands there. Exit statuses (CONTRACTS.md): 0 accepted (prints the effective
+start slot and lands there. Exit statuses (docs/cli.md): 0 accepted (prints the effective
 time), 1 refused (no stations, already returning, the fleet landing) or no mission running,
 2 bad input.
 """

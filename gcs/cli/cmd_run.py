@@ -1,7 +1,7 @@
 """`gcs mission run FILE`: plan, connect (starting the simulated fleet), fly, land, summarise.
 
 Registered under `gcs mission` (through `gcs.cli.cmd_mission.SUBCOMMANDS`). Exit statuses
-(CONTRACTS.md): 0 completed, 1 aborted or a safety bound broken (or no valid path), 2 bad
+(docs/cli.md): 0 completed, 1 aborted or a safety bound broken (or no valid path), 2 bad
 input. With `--json` exactly one JSON object goes to stdout (the run JSON, also on exit 1) and
 human text to stderr.
 """
@@ -139,7 +139,7 @@ def register(mission_commands: argparse._SubParsersAction) -> None:
 
 
 def default_log_path(name: str, now: datetime | None = None) -> Path:
-    """`./logs/<name>-<UTC yyyymmddThhmmssZ>.mcap` (CONTRACTS.md)."""
+    """`./logs/<name>-<UTC yyyymmddThhmmssZ>.mcap` (docs/cli.md)."""
     stamp = (now or datetime.now(UTC)).strftime("%Y%m%dT%H%M%SZ")
     return Path("logs") / f"{name}-{stamp}.mcap"
 

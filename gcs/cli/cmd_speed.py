@@ -2,7 +2,7 @@
 
 The running `gcs mission run` listens on a Unix socket next to its log, `<log>.sock` (owner-only
 permissions). Without `--socket` or `--log`, the newest socket under `./logs/` is used.
-Exit statuses (CONTRACTS.md): 0 accepted (prints the sequence number and the effective time),
+Exit statuses (docs/cli.md): 0 accepted (prints the sequence number and the effective time),
 1 refused by the mission or no mission running, 2 bad input. `add_mission_arguments`, `ask`,
 `number` and `positive_int` are shared with `gcs return` and `gcs relieve`
 (`gcs.cli.cmd_return`, `gcs.cli.cmd_relieve`).

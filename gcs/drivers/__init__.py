@@ -1,4 +1,4 @@
-"""Driver registry: the ONE place that maps `fleet.backend` to a driver family (CONTRACTS.md:
+"""Driver registry: the ONE place that maps `fleet.backend` to a driver family (docs/outputs.md:
 the GCS picks its driver from `fleet.backend`, never from the heartbeat).
 
 A family lives in its own module `gcs/drivers/<backend>.py` with a `Driver` subclass (see

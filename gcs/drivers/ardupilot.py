@@ -1,4 +1,4 @@
-"""ArduPilot Copter driver (as recorded from ArduCopter 4.7 SITL, `shared/sitl/README.md`).
+"""ArduPilot Copter driver (as recorded from ArduCopter 4.7 SITL, `tests/sitl/README.md`).
 
 * Connecting: ArduPilot streams almost nothing on a fresh link, so the driver asks with
   `MAV_CMD_SET_MESSAGE_INTERVAL` for GLOBAL_POSITION_INT, SYS_STATUS, GPS_RAW_INT,

@@ -204,7 +204,7 @@ class UavSpec:
 
     `uav_id` is 1..N in formation order; `start_slot` / `goal_slot` are the parking slots
     (local x, y in metres) where its home must be and where it lands; `altitude` is the cruise
-    altitude above the origin (CONTRACTS.md).
+    altitude above the origin (docs/mission-file.md).
     """
 
     uav_id: int
@@ -229,7 +229,7 @@ class DriverEvent:
 
 @dataclass(frozen=True)
 class LeaderRequest:
-    """A speed change asked for by a UAV acting as leader (CONTRACTS.md: x = 0, y = its seq)."""
+    """A speed change asked for by a UAV acting as leader (docs/outputs.md: x = 0, y = its seq)."""
 
     uav_id: int
     seq: int | None
@@ -709,7 +709,7 @@ class Driver(ABC):
         self._last_setpoint = now
 
     def send_speed_change(self, change: SpeedChange, now: float) -> None:
-        """Broadcast leg for this UAV: COMMAND_INT DO_CHANGE_SPEED (CONTRACTS.md, MAVLink),
+        """Broadcast leg for this UAV: COMMAND_INT DO_CHANGE_SPEED (docs/outputs.md, MAVLink),
         retransmitted until its COMMAND_ACK; the ack time lands in `speed_acks[seq]`."""
         spec = CommandSpec(
             SPEED_CHANGE_COMMAND,
@@ -1168,7 +1168,7 @@ class Driver(ABC):
     def _on_sys_status(self, msg, now: float) -> None:
         if msg.onboard_control_sensors_present & PREARM_CHECK_BIT:
             self.telemetry.prearm_ok = bool(msg.onboard_control_sensors_health & PREARM_CHECK_BIT)
-        # battery_remaining, % (-1: unknown). As recorded (shared/sitl): ArduCopter 4.7 SITL
+        # battery_remaining, % (-1: unknown). As recorded (tests/sitl): ArduCopter 4.7 SITL
         # sends 100 at boot, draining in flight (85 after 110 s), and no BATTERY_STATUS; PX4
         # SIH sends 99-100, draining once armed to a floor of 51 (its simulated battery stops
         # at 50 %), recharging once landed, with a BATTERY_STATUS of the same value. The
@@ -1187,7 +1187,7 @@ class Driver(ABC):
         self.commands.on_ack(msg, now)
 
     def _on_command(self, msg, now: float) -> None:
-        """A command sent TO the ground station: a leader's speed request (CONTRACTS.md)."""
+        """A command sent TO the ground station: a leader's speed request (docs/outputs.md)."""
         if msg.target_system not in (0, self.link.mav.srcSystem):
             return
         change = decode_speed_change(msg)

@@ -1,4 +1,4 @@
-"""PX4 multicopter driver (as recorded from PX4 SITL SIH, `shared/sitl/README.md`).
+"""PX4 multicopter driver (as recorded from PX4 SITL SIH, `tests/sitl/README.md`).
 
 * PX4 streams its telemetry on its offboard/API link (instance i sends towards UDP 14540+i);
   the driver only raises GLOBAL_POSITION_INT to 10 Hz.

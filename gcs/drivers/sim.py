@@ -35,7 +35,7 @@ from vehicles.ports import free_udp_ports
 log = logging.getLogger(__name__)
 mavlink = mavutil.mavlink
 
-#: ArduCopter custom modes the simulated vehicles implement (see ../shared/sitl/README.md).
+#: ArduCopter custom modes the simulated vehicles implement (see tests/sitl/README.md).
 COPTER_MODES = {
     FlightMode.GUIDED: COPTER_MODE["GUIDED"],
     FlightMode.HOLD: COPTER_MODE["LOITER"],

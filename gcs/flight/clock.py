@@ -21,7 +21,7 @@ class MissionClock:
     backlog is processed is stamped later than what follows), and `resume(now, at)` restarts it
     from mission time `at`, which is never earlier than where it stood. `log_time_ns` is the
     Unix time (ns) at mission time 0 plus the mission time, the recording's time base
-    (CONTRACTS.md, MCAP); the epoch never changes, so log times stay monotonic too.
+    (docs/outputs.md, MCAP); the epoch never changes, so log times stay monotonic too.
     """
 
     def __init__(

@@ -16,11 +16,11 @@ vehicles and radio medium in process, in-memory links). The loop calls, in order
 At each tick the core:
 
 1. turns speed requests (schedule, operator, leader, Ctrl-C, link loss) into time-stamped
-   changes of the formation's speed profile, broadcast to every UAV (DESIGN 4);
+   changes of the formation's speed profile, broadcast to every UAV (docs/design.md 4);
 2. takes each UAV off when its departure Phi(L_0,n) approaches (minus the take-off lead),
    lands it when it sits on its arrival slot after Phi(L_{K+1},n);
 3. streams one setpoint per UAV in flight, from the smoothed reference of V_n(t) (position,
-   velocity, acceleration; DESIGN 3.5), converted for the whole fleet at once;
+   velocity, acceleration; docs/design.md 3.5), converted for the whole fleet at once;
 4. steps the drivers (handshakes, retransmissions), runs the monitors, records.
 
 Monitoring-station missions (`formation.stations`, use case 1): the formation caps each UAV
@@ -537,7 +537,7 @@ class GroundStation:
         return 5.0 + 1.5 * climb
 
     def smoothing_bound(self) -> float:
-        """Bound of |smoothed reference - V_n| for the profile flown so far (DESIGN 3.5)."""
+        """Bound of |smoothed reference - V_n| for the profile flown so far (docs/design.md 3.5)."""
         return float(smoothing_error_bound(self.formation, self.profile, self.window_s))
 
     def note(self, level: str, kind: str, text: str, now: float) -> None:
@@ -1617,7 +1617,7 @@ class GroundStation:
 
     def _on_position(self, index: int, driver: Driver, truth: bool, now: float) -> None:
         """A position sample for the metrics: the true one from a simulator (SIM_STATE), else
-        the reported one (CONTRACTS.md: distances and tracking error use true positions)."""
+        the reported one (docs/outputs.md: distances and tracking error use true positions)."""
         tel = driver.telemetry
         position = tel.true_position_enu if truth else tel.position_enu
         velocity = tel.true_velocity_enu if truth else tel.velocity_enu

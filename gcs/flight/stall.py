@@ -9,7 +9,7 @@ more than its speed, a few metres ahead of it.
 
 The formation resumes with a pause of `pause_s` inserted at mission time `at` (the targets the
 UAVs match), and the mission clock set to `at + pause_s / 2`. With the moving-average reference
-of width w (DESIGN 3.5: `planner.kinematics.smoothed_reference`) a pause of length L <= w
+of width w (docs/design.md 3.5: `planner.kinematics.smoothed_reference`) a pause of length L <= w
 leaves the reference, at the middle of the pause, exactly at S(at) moving at v (1 - L / w),
 not accelerating, and then accelerating at v / w back to v:
 

@@ -1,4 +1,4 @@
-"""Flight recording: one MCAP file per run, written with foxglove-sdk (CONTRACTS.md, MCAP).
+"""Flight recording: one MCAP file per run, written with foxglove-sdk (docs/outputs.md, MCAP).
 
 Topics. Foxglove's well-known schemas (protobuf), so its panels work without configuration:
 * `/uav<n>/fix` (`foxglove.LocationFix`): the position UAV n reports (Map panel);

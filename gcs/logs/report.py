@@ -1,6 +1,6 @@
 """`gcs log report`: the paper's figures and a short summary from a recording, without flying.
 
-Everything is recomputed from what the log holds (DESIGN 5):
+Everything is recomputed from what the log holds (docs/design.md 5):
 * the fleet samples the GCS's monitors checked (`/metrics` positions, every tick) go through
   the planner's guarantee checks (`planner.guarantees.check_positions`): smallest UAV-UAV and
   UAV-obstacle distance over time (the paper's figs. 8 and 9, D_min) and connectivity;

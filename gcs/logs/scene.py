@@ -8,10 +8,10 @@ x east, y north, z up, metres):
 * obstacles extruded to `DISPLAY_HEIGHT_FACTOR` x the cruise altitude (the paper's obstacles
   are 2-D: the fleet flies around them, so they are drawn taller than it flies), walls as
   vertical panels, their rho_c margins (mitre corners, square caps, as the planner's graph
-  assumes; DESIGN 3.1) as red outlines at the cruise altitude;
+  assumes; docs/design.md 3.1) as red outlines at the cruise altitude;
 * the planned path at the cruise altitude, the parking rows and slots on the ground, base
   stations (A, B and the mission's extra ones) as masts, ground users as cubes; for a
-  stations mission (DESIGN 7) the route, each monitoring point as a gold column named after
+  stations mission (docs/design.md 7) the route, each monitoring point as a gold column named after
   the point and the UAV that holds it, and every UAV's station on the route as a small disc
   at the cruise altitude;
 * each UAV as a sphere in frame `uav<n>`, its virtual target V_n(t) (eq. 27) as a ring of

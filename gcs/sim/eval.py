@@ -13,7 +13,7 @@ station, sec. VI-A, and ground users, sec. VI-B): the medium has no contention, 
 never changes what the other sees, and one flight per configuration serves both.
 
 Outputs in the chosen directory: `fig08_*.png` ... `fig16_*.png`, `table.md` (our figures next
-to the paper's, DESIGN 6) and `results.json` (every number of the table and of each run).
+to the paper's, docs/design.md 6) and `results.json` (every number of the table and of each run).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ DEFAULT_MISSION = REPO / "examples" / "table-ii.yaml"
 DPI = 110
 UAV_DATA, GROUND = KINDS.index("uav_data"), KINDS.index("ground")
 
-#: What the paper reports (sec. VI; DESIGN 6 on its ground-user counts that do not add up).
+#: What the paper reports (sec. VI; docs/design.md 6 on its ground-user counts that do not add up).
 PAPER = {
     "min_uav_uav_parked_m": 15.0,
     "worst_reaction_s": 0.58,
@@ -514,7 +514,7 @@ def comparison(
     network: dict[str, dict] | None = None,
     buildings: list[dict] | None = None,
 ) -> list[tuple[str, str, str, str, str]]:
-    """Rows (quantity, paper, ours, ns-3, note) of the table next to the paper (DESIGN 6).
+    """Rows (quantity, paper, ours, ns-3, note) of the table next to the paper (docs/design.md 6).
     `network`: run label -> `gcs.netsim.paper.net_metrics` of that flight replayed in ns-3
     (the ns-3 cells are empty without it); `buildings`: the metrics of `buildings_runs`."""
     by_label = {m["label"]: m for m in metrics}
@@ -608,7 +608,7 @@ def comparison(
                 f"{_fmt(100 * g['ratio'], 1)} % ({g['received']}/{g['sent']}, "
                 f"{g['dropped']} dropped)",
                 "" if n is None else _net_counts(n["ground_users"]),
-                "S_r-d; the paper's own counts do not add up (DESIGN 6): compare ratios",
+                "S_r-d; the paper's own counts do not add up (docs/design.md 6): compare ratios",
             )
         )
         far = m["ground_users_beyond_stations"]

@@ -15,7 +15,7 @@ JSON's `log` is null without one, and the MAVLink topics are never written), no 
 the vehicles skip the telemetry streams the core does not read (attitude, BATTERY_STATUS,
 VFR_HUD, local position; the battery level comes with SYS_STATUS). Nobody is there to ask a stations mission's fleet home: without `return.at`
 or a `dwell_s` on every point, it returns as soon as every UAV is on station
-(`RunOptions.return_when_on_station`). The result is the run JSON of CONTRACTS.md plus the
+(`RunOptions.return_when_on_station`). The result is the run JSON of docs/outputs.md plus the
 time series the paper's figures need, sampled from the true state of the simulation.
 """
 

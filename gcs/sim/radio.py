@@ -5,7 +5,7 @@ the extra ones, radio range, the `radio:` section with its model, ground users, 
 `MediumProcess` starts
 `python -m medium.cli` between the GCS and the vehicle processes, always stops it,
 and collects its periodic reports (JSON datagrams on a loopback UDP socket: never blocking,
-whoever reads them or not). The last report is the run JSON's `radio` object (CONTRACTS.md).
+whoever reads them or not). The last report is the run JSON's `radio` object (docs/outputs.md).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from planner.sight import Sight, sight_json
 
 log = logging.getLogger(__name__)
 
-#: The run JSON's `radio` keys (CONTRACTS.md), plus our extras.
+#: The run JSON's `radio` keys (docs/outputs.md), plus our extras.
 RUN_JSON_KEYS = ("connected_fraction", "packets", "delay_ms", "ground_users", "hops", "per_uav")
 MAX_REPORT_BYTES = 65535
 MAX_REPORTS_PER_POLL = 100

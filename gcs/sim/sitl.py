@@ -85,7 +85,7 @@ class LaunchPlan:
 
 def plan_for_launch(mission: Mission) -> MissionPlan:
     """Plan `mission` whatever its backend and connections say: the launch plan is what
-    produces the connections (CONTRACTS.md would refuse a SITL mission without them)."""
+    produces the connections (docs/mission-file.md: a SITL mission without them is refused)."""
     fleet = dataclasses.replace(mission.fleet, backend="sim", connections=())
     return plan_mission(dataclasses.replace(mission, fleet=fleet))
 

@@ -1,6 +1,6 @@
-"""Fake ArduCopter (V4.7.0-dev SITL) built from the A1/A2 transcripts of `shared/sitl/`.
+"""Fake ArduCopter (V4.7.0-dev SITL) built from the A1/A2 transcripts of `tests/sitl/`.
 
-What it reproduces (times from the first HEARTBEAT at speedup 1; `shared/sitl/README.md`):
+What it reproduces (times from the first HEARTBEAT at speedup 1; `tests/sitl/README.md`):
 
 * Boot: HEARTBEAT 89/0/BOOT, `ArduPilot Ready` at +1.44 s (a mode set during boot is reset to
   STABILIZE then), STABILIZE disarmed 81/0/STANDBY; GPS fix +9.2 s; EKF origin +19.0 s

@@ -1,7 +1,7 @@
 """Fake PX4 (SITL SIH, quad-X, main of Aug 2025) built from the P1/P2 transcripts of
-`shared/sitl/`, as seen on its offboard/API link (MAVLink mode "onboard").
+`tests/sitl/`, as seen on its offboard/API link (MAVLink mode "onboard").
 
-What it reproduces (times from the first HEARTBEAT at speedup 1; `shared/sitl/README.md`):
+What it reproduces (times from the first HEARTBEAT at speedup 1; `tests/sitl/README.md`):
 
 * Boot: GPS fix and local position before the first HEARTBEAT (29 / AUTO.LOITER / UNINIT),
   HOME_POSITION +1.0 s (then every 2 s), GLOBAL_POSITION_INT +1.6 s, armable (SYS_STATUS

@@ -1,4 +1,4 @@
-"""Transcripts of `shared/sitl/`: reading them, re-encoding their messages with pymavlink, and
+"""Transcripts of `tests/sitl/`: reading them, re-encoding their messages with pymavlink, and
 replaying their ground-station side into a fake autopilot model in simulated time.
 """
 

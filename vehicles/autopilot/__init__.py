@@ -5,7 +5,7 @@ at the control rate with the current :class:`Stamp` (simulated and wall-clock se
 autopilot writes references into the shared :class:`~vehicles.dynamics.FleetDynamics` and
 appends the messages to send to ``outbox``.
 
-Identity and modes follow ArduCopter (``../shared/sitl/README.md``, ArduPilot's source where
+Identity and modes follow ArduCopter (``tests/sitl/README.md``, ArduPilot's source where
 the transcripts are silent): HEARTBEAT type 2 (quadrotor), autopilot 3 (ArduPilotMega),
 custom_mode = Copter mode number (STABILIZE 0, AUTO 3, GUIDED 4, LOITER 5, RTL 6, LAND 9,
 BRAKE 17); ``MAV_CMD_DO_SET_MODE`` is acknowledged, ``SET_MODE`` is not; an unknown mode gets

@@ -73,7 +73,7 @@ def update_gcs_failsafe(ap: Autopilot, stamp: Stamp) -> None:
 
 def gcs_alive(ap: Autopilot, stamp: Stamp) -> None:
     """The GCS failsafe is armed by the GCS's first HEARTBEAT; from then on any valid
-    message from its system id proves it alive (CONTRACTS.md, MAVLink), so that on a lossy
+    message from its system id proves it alive (docs/outputs.md, MAVLink), so that on a lossy
     link its 10 Hz setpoints keep the failsafe off when five 1 Hz heartbeats are lost."""
     ap.gcs_last = stamp
     if ap.gcs_failsafe is not None:

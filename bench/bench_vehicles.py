@@ -79,7 +79,7 @@ def _frames(count: int) -> tuple[bytes, list[list[bytes]], list[bytes]]:
     return heartbeat, setup, setpoints
 
 
-def measure(
+def measure(  # noqa: C901 (over 15 branches: to split)
     count: int, speedup: float, measure_s: float, drive_speedup: float | None = None
 ) -> Run:
     """Drive ``count`` vehicles at ``speedup`` for ``measure_s`` wall seconds after a warm-up

@@ -57,7 +57,7 @@ def _shape_patch(geom: shapely.Geometry, **style) -> PathPatch:
     return PathPatch(MplPath(vertices, codes), **style)
 
 
-def draw_map(ax, plan: MissionPlan) -> None:
+def draw_map(ax, plan: MissionPlan) -> None:  # noqa: C901 (over 15 branches: to split)
     mission = plan.mission
     pp = plan.path_plan
     rho = mission.safety_margin

@@ -372,7 +372,7 @@ def _apart(problem: PathProblem) -> float:
     return 2.0 * problem.safety_margin - DISTANCE_TOLERANCE
 
 
-def _walk_search(
+def _walk_search(  # noqa: C901 (over 15 branches: to split)
     cache: EdgeCache,
     rows: _RowFilter,
     budget: _Budget,
@@ -493,7 +493,7 @@ def _walk_search(
     return None, "exhausted-short" if pruned else "exhausted"
 
 
-def _label_search(
+def _label_search(  # noqa: C901 (over 15 branches: to split)
     problem: PathProblem,
     cache: EdgeCache,
     rows: _RowFilter,

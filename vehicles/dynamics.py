@@ -411,7 +411,7 @@ class FleetDynamics:
         spread[:] = row
         return spread
 
-    def _integrate(self, count: int) -> None:
+    def _integrate(self, count: int) -> None:  # noqa: C901 (over 15 branches: to split)
         """The hot loop: position/velocity controller, thrust lag, physics and disturbances;
         heading and battery every `_SLOW_STATE_STEPS` steps.
 

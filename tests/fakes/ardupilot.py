@@ -442,7 +442,7 @@ class ArduCopterModel(FakeAutopilot):
                 self._last_prearm_report = now
                 self.outbox.send(now, text(2, "PreArm: Need Position Estimate"))
 
-    def _fly(self, now: float, dt: float) -> None:
+    def _fly(self, now: float, dt: float) -> None:  # noqa: C901 (over 15 branches: to split)
         p = self.params
         s = self.speedup
         if self.armed and not self.flying():  # auto-disarm on the ground

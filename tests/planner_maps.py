@@ -1,10 +1,16 @@
-"""Hand-made planning maps shared by the planner's tests: a `PathProblem` builder and squares."""
+"""Planning maps shared by the planner's tests: a `PathProblem` builder, squares and rotated
+rectangles, hand-made maps, and random route maps (a hypothesis strategy)."""
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
+import numpy as np
+from hypothesis import strategies as st
+
+from planner.formation import min_radio_range
 from planner.obstacles import Obstacles
+from planner.route import RouteProblem
 from planner.scenarios import rectangle_rings
 from planner.types import PathProblem
 
@@ -54,3 +60,56 @@ def terraced_rows(
     ]
     rect = [(x + width / 2.0, y + depth / 2.0, width, depth, 0.0) for x, y in corners]
     return list(rectangle_rings(np.array(rect)))
+
+
+def rectangle(center, size, angle_deg):
+    """Corners of a rotated rectangle, counter-clockwise."""
+    half = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * np.asarray(size) / 2
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    return half @ np.array([[c, s], [-s, c]]) + np.asarray(center)
+
+
+# A map (frozen from the property-test family) whose shortest walk meeting (1)-(4) comes
+# back within 2 rho_c of itself: the repair search must find the valid path.
+REPAIR = dict(
+    start=(0.0, 0.0),
+    goal=(-17.0, 21.7),
+    theta_a=7.0,
+    theta_b=125.0,
+    obstacles=Obstacles(
+        polygons=(np.array([[-80.0, -133.8], [-55.7, -133.8], [-55.7, -107.7], [-80.0, -107.7]]),),
+        walls=np.array([[[97.3, 97.2], [102.9, 114.7]]]),
+    ),
+)
+
+
+@st.composite
+def route_maps(draw):
+    """A 400 m x 300 m map, A on the left, 1-8 points, up to 5 rectangles."""
+    rho = draw(st.floats(2.0, 6.0))
+    radio = draw(st.floats(min_radio_range(rho) + 1.0, 120.0))
+    start = np.array([draw(st.floats(0.0, 30.0)), draw(st.floats(0.0, 300.0))])
+    polygons = tuple(
+        rectangle(
+            (draw(st.floats(60.0, 380.0)), draw(st.floats(0.0, 300.0))),
+            (draw(st.floats(5.0, 60.0)), draw(st.floats(5.0, 90.0))),
+            draw(st.floats(0.0, 90.0)),
+        )
+        for _ in range(draw(st.integers(0, 5)))
+    )
+    obstacles = Obstacles(polygons=polygons)
+    count = draw(st.integers(1, 8))
+    points = np.array(
+        [[draw(st.floats(50.0, 400.0)), draw(st.floats(0.0, 300.0))] for _ in range(count)]
+    )
+    problem = RouteProblem(
+        start=start,
+        points=points,
+        start_angle_deg=draw(st.floats(-60.0, 60.0)),
+        safety_margin=rho,
+        radio_range=radio,
+        obstacles=obstacles,
+        order=draw(st.sampled_from(["tsp", "given"])),
+        max_expansions=200_000,
+    )
+    return problem

@@ -35,7 +35,7 @@ from gcs.signing import FleetSigning
 from tests.attacker import codec, mutate, timestamp_now
 from tests.conftest import MISSIONS
 from tests.flying import MISSION, Flight, mission_file
-from tests.test_run_link import drain
+from tests.links import drain
 
 RNG = random.Random(20)
 

@@ -41,7 +41,7 @@ from medium.medium import MediumModel, offered_data_bps
 from medium.radio import Channel, RadioConfig, topology
 from medium.radio_stats import KINDS
 from tests.conftest import MISSIONS
-from tests.test_mission import MINIMAL
+from tests.mission_texts import MINIMAL
 
 PROBABILITIES = [0.0, 0.05, 0.25, 0.5, 0.75, 0.95, 0.99, 1.0]
 

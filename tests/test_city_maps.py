@@ -14,6 +14,7 @@ from gcs.mission import load_mission
 from gcs.planning import mission_problem, plan_json, plan_mission
 from planner.validity import check_path
 from tests.conftest import EXAMPLES
+from tests.footprint_files import MESSY
 
 HELSINKI = EXAMPLES / "helsinki-centre.yaml"
 
@@ -87,30 +88,6 @@ def test_the_plan_says_which_gap_tolerance_it_was_given(helsinki, gcs_main):
     result = gcs_main("mission", "check", HELSINKI, "--json", "--gap", "0.5")
     assert result.returncode == 0
     assert json.loads(result.stdout)["gap_tolerance"] == 0.005
-
-
-MESSY = {
-    "type": "FeatureCollection",
-    "features": [
-        {"type": "Feature", "properties": {}, "geometry": {"type": "Point", "coordinates": [0, 0]}},
-        {
-            "type": "Feature",
-            "properties": {},
-            "geometry": {
-                "type": "Polygon",
-                "coordinates": [
-                    [
-                        [-0.00031, -0.00005],
-                        [-0.00018, -0.00005],
-                        [-0.00018, 0.00005],
-                        [-0.00031, 0.00005],
-                        [-0.00031, -0.00005],
-                    ]
-                ],
-            },
-        },
-    ],
-}
 
 
 def _messy_mission(tmp_path, goal_x: float) -> str:

@@ -25,7 +25,7 @@ from gcs.footprints import (
 )
 from gcs.geodesy import local_to_lonlat, lonlat_to_local
 from gcs.mission import load_mission
-from tests.test_mission import LYON, MINIMAL
+from tests.mission_texts import LYON, MINIMAL
 
 MISSION = (
     MINIMAL.replace("version: 1\n", "version: 1\norigin: {lat: 45.7640, lon: 4.8357, alt: 170}\n")

@@ -19,7 +19,7 @@ from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
 from gcs.sim.fastsim import FastOptions, fly_fast
 from planner.scenarios import city_grid, random_buildings
-from tests.test_sight import brute_connected
+from tests.sight_checks import brute_connected
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

@@ -11,22 +11,13 @@ import pytest
 from gcs.flight.clock import MissionClock
 from gcs.link import mavutil
 from gcs.logs.recording import FlightRecorder
+from tests.cli_refusals import one_line_exit_2
 
 
 @pytest.fixture
 def gcs_log(gcs_main):
     """`gcs ARGS` in this process (conftest's `gcs_main`)."""
     return gcs_main
-
-
-def one_line_exit_2(result, *names: str) -> None:
-    code, out, err = result
-    assert code == 2, err
-    assert out == ""
-    assert err.count("\n") == 1, err
-    assert "Traceback" not in err
-    for name in names:
-        assert name in err
 
 
 @pytest.fixture

@@ -28,7 +28,7 @@ from planner.formation import ParkingRows
 from planner.guarantees import check_positions
 from planner.kinematics import LineFormation, SpeedProfile
 from tests.flying import Flight, environment, flight_speedup, gcs_command
-from tests.test_run_recording import (
+from tests.foxglove_client import (
     foxglove_channels,
     foxglove_connect,
     foxglove_receive,

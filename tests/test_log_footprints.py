@@ -12,8 +12,8 @@ from gcs.logs.logreader import Recording
 from gcs.logs.recording import mission_geojson_files
 from gcs.logs.report import _mission
 from gcs.mission import load_mission
-from tests.test_city_maps import MESSY
-from tests.test_mission import MINIMAL
+from tests.footprint_files import MESSY
+from tests.mission_texts import MINIMAL
 
 MISSION = MINIMAL.replace("version: 1\n", "version: 1\norigin: {lat: 0.0, lon: 0.0, alt: 0.0}\n")
 

@@ -16,18 +16,7 @@ from gcs.errors import InputError
 from gcs.geodesy import Origin, enu_to_geodetic, geodetic_to_enu, local_to_lonlat, lonlat_to_local
 from gcs.mission import DEFAULT_ORIGIN, DEFAULT_TRACKING_FRACTION, load_mission
 from tests.conftest import EXAMPLES
-
-MINIMAL = """\
-version: 1
-start: {x: 0, y: 0}
-goal: {x: 300, y: 100}
-safety_margin: 5
-radio_range: 120
-altitude: 30
-speed: {max: 8}
-"""
-
-LYON = Origin(lat=45.7640, lon=4.8357, alt=170.0)
+from tests.mission_texts import LYON, MINIMAL
 
 
 def write(tmp_path: Path, text: str, name: str = "mission.yaml") -> Path:

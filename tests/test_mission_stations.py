@@ -11,11 +11,10 @@ import numpy as np
 import pytest
 
 from gcs.errors import InputError
-from gcs.geodesy import Origin, geodetic_to_enu
+from gcs.geodesy import geodetic_to_enu
 from gcs.mission import Mission, Station, load_mission
 from tests.conftest import EXAMPLES
-
-LYON = Origin(lat=45.7640, lon=4.8357, alt=170.0)
+from tests.mission_texts import LYON
 
 HEAD = """\
 version: 1

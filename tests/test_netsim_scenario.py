@@ -25,7 +25,7 @@ from gcs.netsim.scenario import (
 )
 from gcs.planning import plan_mission
 from gcs.sim.fastsim import FastOptions, fly_fast
-from tests.test_log_cli import one_line_exit_2
+from tests.cli_refusals import one_line_exit_2
 
 MISSION = Path(__file__).resolve().parent / "missions" / "core.yaml"
 

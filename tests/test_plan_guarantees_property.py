@@ -21,15 +21,9 @@ from planner.kinematics import LineFormation, SpeedProfile
 from planner.obstacles import Obstacles
 from planner.search import plan_path
 from planner.types import PathProblem
+from tests.planner_maps import rectangle
 
 SAMPLE_RATE_HZ = 10.0
-
-
-def rectangle(center, size, angle_deg):
-    """Corners of a rotated rectangle, counter-clockwise."""
-    half = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * np.asarray(size) / 2
-    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
-    return half @ np.array([[c, s], [-s, c]]) + np.asarray(center)
 
 
 @st.composite

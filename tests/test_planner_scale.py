@@ -26,8 +26,7 @@ from planner.scenarios import (
 from planner.search import SearchProgress, goal_distance, plan_path
 from planner.types import PathProblem
 from planner.validity import check_path
-from tests.planner_maps import problem, square, terraced_rows
-from tests.test_planner_search import REPAIR
+from tests.planner_maps import REPAIR, problem, square, terraced_rows
 
 
 def _complete_graph_distances(cache: EdgeCache) -> dict[int, float]:

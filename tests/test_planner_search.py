@@ -16,7 +16,7 @@ from planner.obstacles import Obstacles
 from planner.scenarios import city_grid, paper_scenario, random_buildings, scenario_problem
 from planner.search import plan_path
 from planner.validity import check_path
-from tests.planner_maps import RHO, problem, square
+from tests.planner_maps import REPAIR, RHO, problem, square
 
 
 def ring_walls(ring):
@@ -233,20 +233,6 @@ def test_ray_parking_forbids_obstacles_anywhere_behind_a():
     assert plan_path(problem((0.0, 0.0), (100.0, 0.0), behind)).valid
     ray = plan_path(problem((0.0, 0.0), (100.0, 0.0), behind, parking="ray"))
     assert not ray.valid and "eq. 14" in ray.reason
-
-
-# A map (frozen from the property-test family) whose shortest walk meeting (1)-(4) comes
-# back within 2 rho_c of itself: the repair search must find the valid path.
-REPAIR = dict(
-    start=(0.0, 0.0),
-    goal=(-17.0, 21.7),
-    theta_a=7.0,
-    theta_b=125.0,
-    obstacles=Obstacles(
-        polygons=(np.array([[-80.0, -133.8], [-55.7, -133.8], [-55.7, -107.7], [-80.0, -107.7]]),),
-        walls=np.array([[[97.3, 97.2], [102.9, 114.7]]]),
-    ),
-)
 
 
 def test_repair_of_condition_5_finds_the_valid_path():

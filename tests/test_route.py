@@ -9,20 +9,17 @@ import math
 import numpy as np
 import shapely
 from hypothesis import HealthCheck, assume, event, given, note, settings
-from hypothesis import strategies as st
 
 from planner.formation import (
     DISTANCE_TOLERANCE,
     collision_spacing,
-    min_radio_range,
     radio_spacing,
     row_direction,
 )
 from planner.obstacles import Obstacles
 from planner.route import RouteProblem, plan_route
 from planner.stations import route_length, visit_order, visit_orders
-from tests.planner_maps import RHO, square
-from tests.test_plan_guarantees_property import rectangle
+from tests.planner_maps import RHO, route_maps, square
 
 TOL = 1e-6
 
@@ -147,38 +144,6 @@ def test_a_fixed_fleet_size_keeps_the_extra_uavs_as_relays():
     assert plan.valid, plan.reason
     assert plan.fleet_size == 5 and len(plan.layout.stations) == 5
     check_layout(problem, plan)
-
-
-@st.composite
-def route_maps(draw):
-    """A 400 m x 300 m map, A on the left, 1-8 points, up to 5 rectangles."""
-    rho = draw(st.floats(2.0, 6.0))
-    radio = draw(st.floats(min_radio_range(rho) + 1.0, 120.0))
-    start = np.array([draw(st.floats(0.0, 30.0)), draw(st.floats(0.0, 300.0))])
-    polygons = tuple(
-        rectangle(
-            (draw(st.floats(60.0, 380.0)), draw(st.floats(0.0, 300.0))),
-            (draw(st.floats(5.0, 60.0)), draw(st.floats(5.0, 90.0))),
-            draw(st.floats(0.0, 90.0)),
-        )
-        for _ in range(draw(st.integers(0, 5)))
-    )
-    obstacles = Obstacles(polygons=polygons)
-    count = draw(st.integers(1, 8))
-    points = np.array(
-        [[draw(st.floats(50.0, 400.0)), draw(st.floats(0.0, 300.0))] for _ in range(count)]
-    )
-    problem = RouteProblem(
-        start=start,
-        points=points,
-        start_angle_deg=draw(st.floats(-60.0, 60.0)),
-        safety_margin=rho,
-        radio_range=radio,
-        obstacles=obstacles,
-        order=draw(st.sampled_from(["tsp", "given"])),
-        max_expansions=200_000,
-    )
-    return problem
 
 
 @settings(

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import random
-import selectors
 import socket
 import time
 
 import pytest
 
 from gcs.link import BACKLOG_DATAGRAMS, Link, mavutil
+from tests.links import drain
 
 # Every test here starts a process or flies over UDP.
 pytestmark = pytest.mark.slow
@@ -21,21 +21,6 @@ def vehicle_message(sysid: int):
     mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1)
     msg = mav.heartbeat_encode(2, 3, 217, 4, 4)
     return msg.pack(mav)
-
-
-def drain(link: Link, until, seconds: float = 5.0) -> list:
-    """Receive until `until(messages so far)` holds or the deadline passes (no sleeping)."""
-    selector = selectors.DefaultSelector()
-    selector.register(link.fileno(), selectors.EVENT_READ)
-    got: list = []
-    deadline = time.monotonic() + seconds
-    try:
-        while not until(got) and time.monotonic() < deadline:
-            if selector.select(0.05):
-                got += link.receive(time.monotonic())
-    finally:
-        selector.close()
-    return got
 
 
 def test_liveness_counts_only_the_expected_system_and_survives_garbage():

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from planner.obstacles import Obstacles
 from planner.sight import Sight
+from tests.sight_checks import brute_connected, shapely_blocked
 
 SETTINGS = dict(
     derandomize=True,
@@ -48,12 +49,6 @@ def chords(rng: np.random.Generator, count: int = 400) -> tuple[np.ndarray, np.n
     starts = rng.uniform(-20, 420, (count, 2))
     ends = starts + rng.normal(0, 80, (count, 2))
     return starts, ends
-
-
-def shapely_blocked(polygons, walls, start, end, margin: float) -> bool:
-    line = shapely.LineString([start, end])
-    shapes = [shapely.Polygon(p) for p in polygons] + [shapely.LineString(w) for w in walls]
-    return any(line.distance(shape) <= margin for shape in shapes)
 
 
 @settings(**SETTINGS)
@@ -139,28 +134,6 @@ def test_a_roof_blocks_only_the_chords_that_pass_below_it():
 
 
 # --------------------------------------------------------------------- connectivity by sight
-def brute_connected(xy: np.ndarray, stations: np.ndarray, polygons, walls, radio: float) -> bool:
-    """Every UAV reaches a station by hops within `radio` whose chords meet no obstacle:
-    networkx over plain shapely tests, one chord at a time."""
-    import networkx as nx
-
-    nodes = [("uav", i, p) for i, p in enumerate(xy)] + [
-        ("bs", k, p) for k, p in enumerate(stations)
-    ]
-    graph = nx.Graph()
-    graph.add_nodes_from(range(len(nodes)))
-    for a in range(len(nodes)):
-        for b in range(a + 1, len(nodes)):
-            if nodes[a][0] == nodes[b][0] == "bs":
-                continue
-            pa, pb = nodes[a][2], nodes[b][2]
-            if np.hypot(*(pa - pb)) <= radio and not shapely_blocked(polygons, walls, pa, pb, 0.0):
-                graph.add_edge(a, b)
-    base = [k for k, n in enumerate(nodes) if n[0] == "bs"]
-    reached = set().union(*(nx.node_connected_component(graph, k) for k in base))
-    return all(i in reached for i in range(len(xy)))
-
-
 @settings(**{**SETTINGS, "max_examples": 15})
 @given(seed=st.integers(0, 2**32 - 1))
 def test_connectivity_by_sight_is_what_shapely_and_networkx_find(seed):

@@ -25,7 +25,7 @@ from gcs.link import Link
 from gcs.signing import EphemeralKey, FleetSigning, RejectionLog, load_or_create_key
 from tests.attacker import codec, timestamp_now
 from tests.flying import alive, environment
-from tests.test_run_link import drain
+from tests.links import drain
 from vehicles.link import make_codec
 from vehicles.signing import KeyFileError, VehicleSigning, read_key_file
 from vehicles.testing import GroundStation, VehicleProcess

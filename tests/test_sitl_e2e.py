@@ -17,12 +17,9 @@ from gcs.geodesy import geodetic_to_enu
 from gcs.link import mavutil
 from gcs.logs.logreader import read_recording
 from gcs.mission import load_mission
-from gcs.sim.sitl import launch_plan, plan_for_launch
-from tests.fakes.ardupilot import ArduCopterModel
-from tests.fakes.common import FakeEndpoint, Home, enu_to_global
-from tests.fakes.px4 import Px4Model
-from tests.flying import flight_speedup
-from vehicles.ports import free_udp_ports
+from gcs.sim.sitl import plan_for_launch
+from tests.fakes.common import enu_to_global
+from tests.sitl_fleet import SPEEDUP, fake_fleet
 
 pytestmark = pytest.mark.slow
 mavlink = mavutil.mavlink
@@ -40,32 +37,12 @@ MISSION = {
     "fleet": {"size": "auto"},
     "vehicle": {"max_speed": 12, "max_acceleration": 6, "radius": 0.5},
 }
-#: The fakes run in threads of this process, beside the GCS: at 10x, 0.1 s of CPU starvation
-#: would be 1 s of mission time. (PX4's offboard-loss timeout stays 1 s wall.)
-SPEEDUP = {"ardupilot": flight_speedup(5.0), "px4": flight_speedup(5.0)}
 
 
 @pytest.fixture
 def run_command(gcs_main):
     """`gcs ...` in this process (conftest's `gcs_main`)."""
     return gcs_main
-
-
-def _fleet(mission, backend: str, speedup: float):
-    """Fake SITL instances where `gcs sitl launch-plan` puts them, and the URLs to fly them."""
-    fakes, urls = [], []
-    for v in launch_plan(mission, backend).vehicles:
-        home = Home(v.latitude, v.longitude, v.altitude)
-        if backend == "px4":
-            port = free_udp_ports()
-            model = Px4Model(home, system_id=v.system_id, speedup=speedup, seed=v.uav_id)
-            fakes.append(FakeEndpoint(model, f"udpout:127.0.0.1:{port}"))
-            urls.append(f"udpin:127.0.0.1:{port}")
-        else:
-            model = ArduCopterModel(home, system_id=v.system_id, speedup=speedup)
-            fakes.append(FakeEndpoint(model, "udpin:127.0.0.1:0"))
-            urls.append(f"udpout:127.0.0.1:{fakes[-1].port}")
-    return fakes, urls
 
 
 def _fly(run_command, tmp_path, backend: str, *flags: str, **changes):
@@ -78,7 +55,7 @@ def _fly(run_command, tmp_path, backend: str, *flags: str, **changes):
     path.write_text(yaml.safe_dump(data))
     mission = load_mission(path)
     speedup = SPEEDUP[backend]
-    fakes, urls = _fleet(mission, backend, speedup)
+    fakes, urls = fake_fleet(mission, backend, speedup)
     for fake in fakes:
         fake.start()
     try:

@@ -25,8 +25,8 @@ from gcs.sim.sitl import plan_for_launch
 from tests.conftest import MISSIONS
 from tests.fakes.common import enu_to_global
 from tests.flying import Flight, environment, flight_speedup, gcs_command, read_log
-from tests.test_sitl_e2e import SPEEDUP as SITL_SPEEDUP
-from tests.test_sitl_e2e import _fleet
+from tests.sitl_fleet import SPEEDUP as SITL_SPEEDUP
+from tests.sitl_fleet import fake_fleet
 
 MISSION = MISSIONS / "stations.yaml"
 SPEEDUP = str(flight_speedup(5))  # lower on a busy machine (tests/flying.py)
@@ -154,7 +154,7 @@ def test_fake_arducopters_fly_a_stations_mission_with_the_drivers_as_they_are(
     path.write_text(yaml.safe_dump(SITL_MISSION))
     mission = load_mission(path)
     speedup = SITL_SPEEDUP["ardupilot"]
-    fakes, urls = _fleet(mission, "ardupilot", speedup)
+    fakes, urls = fake_fleet(mission, "ardupilot", speedup)
     for fake in fakes:
         fake.start()
     try:

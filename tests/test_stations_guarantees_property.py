@@ -17,7 +17,7 @@ from planner.formation import DISTANCE_TOLERANCE, collision_spacing
 from planner.guarantees import check_positions
 from planner.kinematics import LineFormation, SpeedProfile
 from planner.route import plan_route
-from tests.test_route import route_maps
+from tests.planner_maps import route_maps
 
 SAMPLE_RATE_HZ = 10.0
 

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from tests.autopilot_bench import Bench
 from tests.fakes.replay import load
-from tests.test_vehicles_autopilot import Bench
 from vehicles import telemetry
 from vehicles.autopilot import AutopilotConfig, FailsafeConfig, Guided, Mode
 from vehicles.autopilot import ftp as mavftp

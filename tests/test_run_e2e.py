@@ -154,6 +154,9 @@ def test_losing_a_vehicle_freezes_reports_and_lands_the_others(tmp_path: Path):
         )  # fmt: skip
         assert too_fast.returncode == 1 and "refused" in too_fast.stderr
 
+        # every UAV following first: a formation already frozen for a late take-off stays
+        # frozen (relabelled "link") and broadcasts no freeze of its own
+        flight.wait_for("UAV 4: taking_off -> following")
         vehicles = children_running(flight.pid, "-m vehicles sim")
         assert len(vehicles) == 3
         (vehicle,) = children_running(flight.pid, "--sysid-base 2 ")
@@ -171,6 +174,7 @@ def test_losing_a_vehicle_freezes_reports_and_lands_the_others(tmp_path: Path):
     assert "operator" in sources
     operator = run["speed_changes"][sources.index("operator")]
     assert operator["speed"] == 6 and len(operator["acks"]) == run["fleet_size"]
+    assert "freeze:link" in sources, (sources, [e["text"] for e in run["events"]])
     freeze = run["speed_changes"][sources.index("freeze:link")]
     assert freeze["speed"] == 0 and freeze["effective_s"] > freeze["requested_s"]
     assert "2" not in freeze["acks"] and len(freeze["acks"]) == run["fleet_size"] - 1

@@ -106,6 +106,17 @@ def test_a_stall_as_long_as_the_setpoint_timeout_picks_the_uavs_up_at_their_spee
     assert run.run_json["max_tracking_error_m"] < 3.0
 
 
+@pytest.mark.parametrize("uav", [2, 3])
+def test_a_stall_with_a_uav_not_heard_lately_resumes_where_it_was_heading(plan, uav):
+    """One UAV's link is cut from 0.7 s before a 1 s stall until after it: its latest sample
+    is 1.7 s old when the backlog is read. It flew its last setpoint on meanwhile, so it is
+    matched where that sample was heading (moved on by its velocity, at most 0.5 s), not where
+    it was last heard: 3.2 m. Taken to stand where it was last heard, with a standing start
+    for everyone, it was 6.6 m, past rho_c."""
+    run = fly(plan, link_cuts=((uav, 12.3, 14.5),), gcs_stalls=((13.0, 14.0),))
+    assert run.stalls and run.run_json["max_tracking_error_m"] < 4.0
+
+
 def test_a_stall_longer_than_the_gcs_failsafe_resumes_where_the_uavs_stand(plan):
     """The ground station stops for 6.5 s (no lockstep: SITL, real vehicles): longer than the
     vehicles' GCS failsafe (5 s), so they brake (BRAKE, out of guided flight) before the

@@ -1,11 +1,12 @@
 """Where and how the formation resumes after a stall of the ground station.
 
 While the ground station did not run, no setpoint went out and each vehicle flew on by itself:
-its autopilot carries the last setpoint on for its setpoint timeout (position, velocity and
-acceleration extrapolated: ArduCopter's and our simulated vehicle's GUIDED, so a UAV that was
-accelerating runs on faster than the formation), then brakes and holds. When the backlog has
-been read, the UAVs may be anywhere from standing still behind the formation to flying on at
-more than its speed, a few metres ahead of it.
+its autopilot carries the last setpoint on for its setpoint timeout (the position moved on by
+the velocity: ArduCopter's and our simulated vehicle's GUIDED), then brakes and holds. A UAV
+that lagged its target (joining the formation, accelerating) closes that gap meanwhile, faster
+than the formation (12.6 m/s in a formation at 8 m/s), and brakes from there. When the backlog
+has been read, the UAVs may be anywhere from standing still behind the formation to flying on
+at more than its speed, a few metres ahead of it.
 
 The formation resumes with a pause of `pause_s` inserted at mission time `at` (the targets the
 UAVs match), and the mission clock set to `at + pause_s / 2`. With the moving-average reference

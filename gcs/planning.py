@@ -244,18 +244,18 @@ def plan_mission(
     size = int(path_plan.fleet_size)
     if fixed is not None:
         _check_fleet_size(mission, fixed, int(path_plan.min_fleet_size), "the planned path")
-    spacing, corner_margin = None, mission.safety_margin
+    spacing, corner_margin, reach = None, mission.safety_margin, None
     if mission.connectivity_rule == "line_of_sight":
         sight = _sight_spacing(mission, problem, path_plan, fixed, progress)
         path_plan, size, spacing = sight.path_plan, sight.fleet_size, sight.spacing
-        corner_margin = sight.corner_margin
+        corner_margin, reach = sight.corner_margin, sight.reach
         invalid = replace(invalid, path_plan=path_plan, planning_time_s=clock() - began)
         check_rows(mission, problem, path_plan.rows, size)
     _check_fleet(mission, size, conns, conn_key)
 
     formation = _formation(mission, path_plan, size, spacing)
     flown = _flown(invalid, formation, cap_speed)
-    return replace(flown, connectivity=_connectivity(mission, formation, corner_margin))
+    return replace(flown, connectivity=_connectivity(mission, formation, corner_margin, reach))
 
 
 #: Line of sight: the fleet is sized and the path planned again at most this many times
@@ -313,6 +313,7 @@ class _SightPlan:
     fleet_size: int
     spacing: float | None
     corner_margin: float
+    reach: float  # the path's chord reach (`_sight_reach`), reported in `connectivity`
 
 
 def _sight_spacing(
@@ -427,7 +428,7 @@ def _rigid_sight(
         spacing = min(reach, spacing_r)
         need = max(1, math.ceil(disk.path_length / spacing - DISTANCE_TOLERANCE))
         if need <= size:
-            return _SightPlan(path_plan, size, spacing if spacing < spacing_r else None, 0.0)
+            return _SightPlan(path_plan, size, spacing if spacing < spacing_r else None, 0.0, reach)
         size = need
         grown = problem.rows(size)
         if row_refusal(problem, grown) is None and check_path(path_plan.path, problem, grown).ok:
@@ -442,8 +443,13 @@ def _rigid_sight(
     return None
 
 
-def _connectivity(mission: Mission, formation: LineFormation, corner_margin: float) -> Connectivity:
-    reach = _sight_reach(mission, formation)
+def _connectivity(
+    mission: Mission, formation: LineFormation, corner_margin: float, reach: float | None = None
+) -> Connectivity:
+    """How the plan stands under both rules; `reach`: the chord reach already computed for
+    this path and fleet (a line-of-sight plan's), else computed here."""
+    if reach is None:
+        reach = _sight_reach(mission, formation)
     spacing_c = collision_spacing(mission.safety_margin)
     rigid = None
     if reach > spacing_c + DISTANCE_TOLERANCE:

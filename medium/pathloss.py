@@ -26,9 +26,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
+
+from medium.radio import LineOfSight
 
 #: TR 38.901 UMi-Street Canyon validity: carrier frequency (GHz) and terminal height (m).
 FREQUENCY_RANGE_GHZ = (0.5, 100.0)
@@ -69,16 +70,12 @@ def nlos_range_m(range_m: float, frequency_ghz: float, height_m: float) -> float
     return float(min(reach, range_m))
 
 
-class _Sight(Protocol):
-    def clear(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray: ...
-
-
 @dataclass(frozen=True, eq=False)
 class ThroughBuildings:
     """A chord is usable by the radio when it clears the buildings (`sight`) or is at most
     `nlos_range_m` long (0: every chord through a building is cut)."""
 
-    sight: _Sight
+    sight: LineOfSight
     nlos_range_m: float = 0.0
 
     def clear(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:

@@ -712,8 +712,9 @@ class GroundStation:
                 if not self.clock.anchored:
                     self.aborting = True
                 continue
+            silences = self._silences(t, now)
             for uav in problem.uavs:
-                silent = self.drivers[uav - 1].link.silent_for(now)
+                silent = float(silences[uav - 1])  # as `links.check` will measure it
                 for event in self.links.mark_lost(t, uav - 1, problem.text, silent):
                     self._event(event, now)
 
@@ -822,6 +823,18 @@ class GroundStation:
 
     def result(self) -> RunResult:
         return self._result()
+
+    def _silences(self, t: float, now: float) -> np.ndarray:
+        """(N,) wall seconds since each UAV's last valid message, as the link monitor judges
+        them: silence the mission clock did not count is none (lockstep or a stall held it
+        back: the world stood still, the UAVs too). A link marked lost (its process exited)
+        is back only when a message makes this shorter than it was then, so both must be
+        measured alike: a wall-clock silence recorded at the exit, against this one a tick
+        later, once read a held-back clock as a message and the link as back."""
+        silent = np.array([d.link.silent_for(now) for d in self.drivers])
+        heard = np.isfinite(self._heard_t)
+        silent[heard] = np.minimum(silent[heard], (t - self._heard_t[heard]) / self.options.speedup)
+        return silent
 
     # ------------------------------------------------------------------ stalls
     def _stalled_since(self, now: float) -> float | None:
@@ -1716,11 +1729,7 @@ class GroundStation:
         recorded = positions if heights is None else fleet
         out_of_fleet = None if excluded is None else [int(i) + 1 for i in np.flatnonzero(excluded)]
         self.recorder.fleet(t, fleet, evaluation.virtual[0], now)
-        silent = np.array([d.link.silent_for(now) for d in self.drivers])
-        # silence the mission clock did not count is none (lockstep held it back: the world
-        # stood still, the UAVs too)
-        heard = np.isfinite(self._heard_t)
-        silent[heard] = np.minimum(silent[heard], (t - self._heard_t[heard]) / self.options.speedup)
+        silent = self._silences(t, now)
         timeout = max(
             self.options.link_timeout_s / self.options.speedup, self.options.link_wall_floor_s
         )

@@ -1,8 +1,8 @@
 """Connectivity by line of sight (`python -m bench sight`, about two minutes): for each example,
 the fleet eq. 28 needs, the share of the disk plan's flight connected by line of sight, the
-rigid line-of-sight fleet on the shortest path (its chord reach), and the line-of-sight plan
-(`connectivity.rule: line_of_sight`): the clearance its corners were planned with, its
-spacing and fleet; the path length and duration of both plans, and the planning time of both (best of 3, in seconds and in units
+rigid line-of-sight fleet on the shortest path (its chord reach) and the elastic one, and the
+line-of-sight plan (`connectivity.rule: line_of_sight`): the clearance its corners were
+planned with, its spacing (rigid or elastic, dS) and fleet; the path length and duration of both plans, and the planning time of both (best of 3, in seconds and in units
 of the machine's reference time R, `bench/machine.py`). Table II is planned with `fleet.size:
 auto` here. Then the small mission and city-blocks, each plan flown in the fast mode through a
 medium that knows the buildings (`radio.buildings`: 3gpp-umi and cut): the share connected."""
@@ -75,8 +75,8 @@ def main() -> None:
     unit = reference_seconds()
     table = Table(title=f"line of sight (R = {unit:.2f} s)")
     for column in (
-        "mission", "eq. 28", "disk: LOS share", "rigid fleet (reach m)", "corners m",
-        "spacing m", "LOS fleet", "chain: shortest / LOS path", "path disk / LOS m", "duration disk / LOS s",
+        "mission", "eq. 28", "disk: LOS share", "shortest path: rigid (reach m) / elastic",
+        "corners m", "spacing", "LOS fleet", "chain: shortest / LOS path", "path disk / LOS m", "duration disk / LOS s",
         "planning disk / LOS s", "in R", "LOS / disk",
     ):  # fmt: skip
         table.add_column(column, justify="left" if column == "mission" else "right")
@@ -90,9 +90,9 @@ def main() -> None:
                 name,
                 str(c.eq28_fleet_size),
                 f"{100 * c.los_connected_fraction:.1f} %",
-                f"{c.rigid_los_fleet_size} ({c.los_reach_m:g})",
+                f"{c.rigid_los_fleet_size} ({c.los_reach_m:g}) / {c.elastic_los_fleet_size}",
                 f"{w.corner_margin_m:g}",
-                f"{w.spacing_m:g}",
+                f"{w.spacing} {w.spacing_m:g} m",
                 str(sight.fleet_size),
                 " / ".join(
                     str(chain_estimate(p.formation, Sight(p.mission.obstacles), limit))
@@ -122,7 +122,10 @@ def _flights() -> Table:
     from gcs.sim.fastsim import FastOptions, fly_fast
 
     table = Table(title="flown through buildings (fast mode)")
-    for column in ("mission", "model", "plan", "UAVs", "connected", "by line of sight", "outcome"):
+    for column in (
+        "mission", "model", "plan", "UAVs", "connected", "by line of sight", "duration s",
+        "worst tracking m", "outcome",
+    ):  # fmt: skip
         table.add_column(column, justify="left" if column in ("mission", "outcome") else "right")
     with tempfile.TemporaryDirectory() as folder:
         for name in FLOWN:
@@ -136,6 +139,7 @@ def _flights() -> Table:
                         name, model, rule, str(run["fleet_size"]),
                         f"{100 * run['radio']['connected_fraction']:.1f} %",
                         f"{100 * run['los_connected_fraction']:.1f} %",
+                        f"{run['duration_s']:.0f}", f"{run['max_tracking_error_m']:.2f}",
                         "completed" if run["completed"] else str(run["reason"])[:60],
                     )  # fmt: skip
     return table

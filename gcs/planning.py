@@ -29,6 +29,7 @@ import numpy as np
 
 from gcs.errors import InputError, RowsRefused
 from gcs.mission import Mission, SpeedSchedule
+from planner.elastic import ElasticWarp, elastic_warp
 from planner.formation import (
     DISTANCE_TOLERANCE,
     ParkingRows,
@@ -72,6 +73,15 @@ class Connectivity:
     spacing_m: float
     corner_margin_m: float  # the clearance the path's corners were planned with (rho_c: none)
     los_connected_fraction: float
+    #: the elastic line-of-sight formation on this path (`planner.elastic`); None: none exists
+    elastic_los_fleet_size: int | None = None
+    #: the flown formation's warp knots (arc from A, formation distance from A); None: rigid
+    warp: np.ndarray | None = None
+
+    @property
+    def spacing(self) -> str:
+        """How the flying UAVs are spaced: `elastic` (a warp) or `rigid` (eq. 27's dS)."""
+        return "elastic" if self.warp is not None else "rigid"
 
     def to_json(self, fleet_size: int) -> dict[str, Any]:
         return {
@@ -79,8 +89,11 @@ class Connectivity:
             "fleet_size": fleet_size,
             "eq28_fleet_size": self.eq28_fleet_size,
             "rigid_los_fleet_size": self.rigid_los_fleet_size,
+            "elastic_los_fleet_size": self.elastic_los_fleet_size,
             "los_reach_m": self.los_reach_m,
+            "spacing": self.spacing,
             "spacing_m": self.spacing_m,
+            "warp_m": None if self.warp is None else _points(self.warp),
             "corner_margin_m": self.corner_margin_m,
             "los_connected_fraction": self.los_connected_fraction,
         }
@@ -89,11 +102,11 @@ class Connectivity:
         """One line when a disk plan's links pass through buildings."""
         if self.rule != "disk" or self.los_connected_fraction >= 1.0:
             return None
+        sizes = [n for n in (self.rigid_los_fleet_size, self.elastic_los_fleet_size) if n]
         need = (
-            f"a rigid line-of-sight formation on this path needs "
-            f"{plural(self.rigid_los_fleet_size, 'UAV')}"
-            if self.rigid_los_fleet_size is not None
-            else "no rigid line-of-sight formation exists on this path"
+            f"a line-of-sight formation on this path needs {plural(min(sizes), 'UAV')}"
+            if sizes
+            else "no line-of-sight formation exists on this path"
         )
         need += " (`connectivity.rule: line_of_sight` also takes its corners wider, for fewer)"
         return (
@@ -244,18 +257,18 @@ def plan_mission(
     size = int(path_plan.fleet_size)
     if fixed is not None:
         _check_fleet_size(mission, fixed, int(path_plan.min_fleet_size), "the planned path")
-    spacing, corner_margin, reach = None, mission.safety_margin, None
+    spacing, corner_margin, sight = None, mission.safety_margin, None
     if mission.connectivity_rule == "line_of_sight":
         sight = _sight_spacing(mission, problem, path_plan, fixed, progress)
         path_plan, size, spacing = sight.path_plan, sight.fleet_size, sight.spacing
-        corner_margin, reach = sight.corner_margin, sight.reach
+        corner_margin = sight.corner_margin
         invalid = replace(invalid, path_plan=path_plan, planning_time_s=clock() - began)
         check_rows(mission, problem, path_plan.rows, size)
     _check_fleet(mission, size, conns, conn_key)
 
-    formation = _formation(mission, path_plan, size, spacing)
+    formation = _formation(mission, path_plan, size, spacing, sight.warp if sight else None)
     flown = _flown(invalid, formation, cap_speed)
-    return replace(flown, connectivity=_connectivity(mission, formation, corner_margin, reach))
+    return replace(flown, connectivity=_connectivity(mission, formation, corner_margin, sight))
 
 
 #: Line of sight: the fleet is sized and the path planned again at most this many times
@@ -277,9 +290,14 @@ WIDER_LENGTH = 1.25
 
 
 def _formation(
-    mission: Mission, path_plan: PathPlan, size: int, spacing: float | None = None
+    mission: Mission,
+    path_plan: PathPlan,
+    size: int,
+    spacing: float | None = None,
+    warp: ElasticWarp | None = None,
 ) -> LineFormation:
-    """The A -> B line formation of `size` UAVs on `path_plan` (dS = `spacing`, or dS_r)."""
+    """The A -> B line formation of `size` UAVs on `path_plan` (dS = `spacing`, or dS_r;
+    elastic with `warp`)."""
     return LineFormation(
         path=path_plan.path,
         fleet_size=size,
@@ -287,6 +305,7 @@ def _formation(
         radio_range=mission.radio_range,
         rows=path_plan.rows,
         spacing=spacing,
+        warp=None if warp is None else warp.knots,
     )
 
 
@@ -298,22 +317,62 @@ def _extended_path(formation: LineFormation) -> np.ndarray:
     return np.vstack([path[0] - row * directions[0], path, path[-1] + row * directions[-1]])
 
 
-def _sight_reach(mission: Mission, formation: LineFormation) -> float:
-    """The formation path's line-of-sight chord reach, at most dS_r."""
-    limit = radio_spacing(mission.safety_margin, mission.radio_range)
-    return chord_reach(_extended_path(formation), Sight(mission.obstacles), limit)
+@dataclass(frozen=True)
+class _SightOptions:
+    """Both line-of-sight formations on one formation's path: the chord reach and the rigid
+    fleet at it (None: reach not above dS_c), and the elastic warp (None: none exists)."""
+
+    reach: float
+    rigid_fleet_size: int | None
+    warp: ElasticWarp | None
+
+    @classmethod
+    def of(cls, mission: Mission, formation: LineFormation) -> _SightOptions:
+        rho = mission.safety_margin
+        limit = radio_spacing(rho, mission.radio_range)
+        spacing_c = collision_spacing(rho)
+        polyline = _extended_path(formation)
+        sight = Sight(mission.obstacles)
+        reach = chord_reach(polyline, sight, limit)
+        rigid = None
+        if reach > spacing_c + DISTANCE_TOLERANCE:
+            rigid = max(1, math.ceil(formation.path_length / reach - DISTANCE_TOLERANCE))
+        row = (formation.fleet_size - 1) * spacing_c
+        warp = elastic_warp(polyline, sight, row, row + formation.path_length, limit, spacing_c)
+        return cls(reach, rigid, warp)
+
+    def best(self, mission: Mission) -> tuple[int, float, float | None, ElasticWarp | None] | None:
+        """The formation with the fewest UAVs, (fleet, eq. 25's total distance, spacing or
+        None for dS_r, warp), ties to the shorter flight; None when neither exists."""
+        limit = radio_spacing(mission.safety_margin, mission.radio_range)
+        options = []
+        if self.rigid_fleet_size is not None:
+            spacing = min(self.reach, limit)
+            total = self.rigid_fleet_size * spacing  # len(P) + (N - 1) dS, up to rounding
+            options.append(
+                (self.rigid_fleet_size, total, spacing if spacing < limit else None, None)
+            )
+        if self.warp is not None:
+            size = self.warp.fleet_size
+            options.append((size, self.warp.formation_length + (size - 1) * limit, None, self.warp))
+        if not options:
+            return None
+        return min(options, key=lambda option: option[:2])
 
 
 @dataclass(frozen=True)
 class _SightPlan:
     """One line-of-sight candidate: its path plan (rows for `fleet_size` at rho_c), the fleet
-    size, the spacing (None: dS_r is clear) and the clearance its corners were planned with."""
+    size, the spacing (None: dS_r), the elastic warp (None: rigid) and the clearance its
+    corners were planned with."""
 
     path_plan: PathPlan
     fleet_size: int
     spacing: float | None
+    warp: ElasticWarp | None
     corner_margin: float
-    reach: float  # the path's chord reach (`_sight_reach`), reported in `connectivity`
+    options: _SightOptions  # both formations on the path, reported in `connectivity`
+    total_distance: float  # eq. 25's: the flight's length in formation distance
 
 
 def _sight_spacing(
@@ -323,31 +382,38 @@ def _sight_spacing(
     fixed: int | None,
     progress: Callable[[SearchProgress], bool],
 ) -> _SightPlan:
-    """`connectivity.rule: line_of_sight` (rigid formation): the spacing dS is the path's
-    chord reach (every chord between two UAVs at most dS apart along the path is clear) and
-    the fleet eq. 28 with dS; the path planned with its corners taken wider as well
-    (`CORNER_FACTORS`, while such a path exists and is at most `WIDER_LENGTH` times the
-    shortest), the fewest UAVs winning. Refused (InputError) when no path has a
-    reach above dS_c, or a fixed fleet is smaller than the fewest."""
+    """`connectivity.rule: line_of_sight`: on each path, the rigid formation (dS the path's
+    chord reach: every chord between two UAVs at most dS apart along it is clear; the fleet
+    eq. 28 with dS) or the elastic one (`planner.elastic`: dS_r in formation distance, the
+    UAVs closing up at the corners), whichever needs fewer UAVs; the path planned with its
+    corners taken wider as well (`CORNER_FACTORS`, while such a path exists, is at most
+    `WIDER_LENGTH` times the shortest and needs fewer UAVs than the one before it), the
+    fewest UAVs winning, then the shorter flight.
+    Refused (InputError) when no path has either, or a fixed fleet is smaller than the
+    fewest."""
     rho = mission.safety_margin
     best: _SightPlan | None = None
+    previous: int | None = None  # the fleet of the last candidate
     for factor in CORNER_FACTORS:
         start = fixed or int(path_plan.fleet_size)
         if factor == 1.0:
-            candidate = _rigid_sight(mission, problem, path_plan, start, progress, replan=True)
+            candidate = _sight_plan(mission, problem, path_plan, start, progress, replan=True)
         else:
             wide = _wider(mission, problem, path_plan, factor, start, progress)
             if wide is None or wide.length_m > WIDER_LENGTH * path_plan.length_m:
                 break
-            candidate = _rigid_sight(mission, problem, wide, start, progress, replan=False)
+            candidate = _sight_plan(mission, problem, wide, start, progress, replan=False)
         if candidate is None:
             continue
         candidate = replace(candidate, corner_margin=factor * rho)
-        key = (candidate.fleet_size, candidate.path_plan.length_m)
-        if best is None or key < (best.fleet_size, best.path_plan.length_m):
+        key = (candidate.fleet_size, candidate.total_distance)
+        if best is None or key < (best.fleet_size, best.total_distance):
             best = candidate
         if best.fleet_size <= int(path_plan.min_fleet_size):
             break  # eq. 28's fleet for the shortest path: no wider corner needs fewer
+        if previous is not None and candidate.fleet_size >= previous:
+            break  # wider corners stopped paying: the next would need as many, or more
+        previous = candidate.fleet_size
     spacing_c = collision_spacing(rho)
     if best is None:
         raise InputError(
@@ -358,13 +424,17 @@ def _sight_spacing(
             "taken wider, so no line-of-sight formation exists",
         )
     if fixed is not None and best.fleet_size > fixed:
+        how = (
+            "its UAVs closing up at the corners (elastic spacing)"
+            if best.warp is not None
+            else f"the path's chords are clear "
+            f"{best.spacing or radio_spacing(rho, mission.radio_range):g} m apart along it"
+        )
         raise InputError(
             mission.source,
             "fleet.size",
-            f"auto or at least {plural(best.fleet_size, 'UAV')} for line of sight (the path's "
-            f"chords are clear {best.spacing or radio_spacing(rho, mission.radio_range):g} m "
-            f"apart along it; eq. 28 needs {plural(int(path_plan.min_fleet_size), 'UAV')}), "
-            f"got {fixed}",
+            f"auto or at least {plural(best.fleet_size, 'UAV')} for line of sight ({how}; "
+            f"eq. 28 needs {plural(int(path_plan.min_fleet_size), 'UAV')}), got {fixed}",
         )
     return best
 
@@ -407,7 +477,7 @@ def _wider(
     )
 
 
-def _rigid_sight(
+def _sight_plan(
     mission: Mission,
     problem: PathProblem,
     path_plan: PathPlan,
@@ -415,20 +485,21 @@ def _rigid_sight(
     progress: Callable[[SearchProgress], bool],
     replan: bool,
 ) -> _SightPlan | None:
-    """The rigid line-of-sight formation on `path_plan`'s path, the fleet grown with its rows
-    until eq. 28 with the reach holds (the path planned again for longer rows when `replan`,
-    else dropped when they break it); None when the reach is not above dS_c."""
-    spacing_c = collision_spacing(mission.safety_margin)
-    spacing_r = radio_spacing(mission.safety_margin, mission.radio_range)
+    """The line-of-sight formation on `path_plan`'s path with the fewest UAVs, rigid or
+    elastic (`_SightOptions`), the fleet grown with its rows until it suffices (the path
+    planned again for longer rows when `replan`, else dropped when they break it); None when
+    neither exists."""
     for _ in range(SIGHT_ROUNDS):
-        disk = _formation(mission, path_plan, size)
-        reach = _sight_reach(mission, disk)
-        if reach <= spacing_c + DISTANCE_TOLERANCE:
+        options = _SightOptions.of(mission, _formation(mission, path_plan, size))
+        best = options.best(mission)
+        if best is None:
             return None
-        spacing = min(reach, spacing_r)
-        need = max(1, math.ceil(disk.path_length / spacing - DISTANCE_TOLERANCE))
+        need, total, spacing, warp = best
         if need <= size:
-            return _SightPlan(path_plan, size, spacing if spacing < spacing_r else None, 0.0, reach)
+            total += (size - need) * (
+                spacing or radio_spacing(mission.safety_margin, mission.radio_range)
+            )
+            return _SightPlan(path_plan, size, spacing, warp, 0.0, options, total)
         size = need
         grown = problem.rows(size)
         if row_refusal(problem, grown) is None and check_path(path_plan.path, problem, grown).ok:
@@ -444,28 +515,24 @@ def _rigid_sight(
 
 
 def _connectivity(
-    mission: Mission, formation: LineFormation, corner_margin: float, reach: float | None = None
+    mission: Mission, formation: LineFormation, corner_margin: float, sight: _SightPlan | None
 ) -> Connectivity:
-    """How the plan stands under both rules; `reach`: the chord reach already computed for
-    this path and fleet (a line-of-sight plan's), else computed here."""
-    if reach is None:
-        reach = _sight_reach(mission, formation)
-    spacing_c = collision_spacing(mission.safety_margin)
-    rigid = None
-    if reach > spacing_c + DISTANCE_TOLERANCE:
-        rigid = max(1, math.ceil(formation.path_length / reach - DISTANCE_TOLERANCE))
-    sight = Sight(mission.obstacles)
+    """How the plan stands under both rules; `sight`: the line-of-sight plan flown (its
+    options already computed for this path and fleet), else they are computed here."""
+    options = sight.options if sight is not None else _SightOptions.of(mission, formation)
     return Connectivity(
         rule=mission.connectivity_rule,
         eq28_fleet_size=min_fleet_size(
             formation.path_length, mission.safety_margin, mission.radio_range
         ),
-        los_reach_m=reach,
-        rigid_los_fleet_size=rigid,
+        los_reach_m=options.reach,
+        rigid_los_fleet_size=options.rigid_fleet_size,
+        elastic_los_fleet_size=None if options.warp is None else options.warp.fleet_size,
+        warp=formation.warp,
         spacing_m=formation.radio_spacing,
         corner_margin_m=corner_margin,
         los_connected_fraction=planned_connected_fraction(
-            formation, mission.base_station_points, mission.radio_range, sight
+            formation, mission.base_station_points, mission.radio_range, Sight(mission.obstacles)
         ),
     )
 

@@ -239,6 +239,13 @@ class LineFormation:
     #: given (line of sight: the path's chord reach, `planner.sight.chord_reach`), in
     #: (dS_c, dS_r].
     spacing: float | None = None
+    #: Elastic spacing (line of sight, `planner.elastic`): knots (M, 2) of the map G from arc
+    #: length along the path (from A) to distance along the formation (from A), increasing,
+    #: from (0, 0) to (len(P), G(len(P))), slope at least 1 between knots. V_n is eq. 27 with
+    #: G(arc) for the arc length: a UAV flies at v / G' (slower where G is steep, so that the
+    #: UAVs behind close up), and UAVs dS apart in formation distance are closer along the
+    #: path there. The path gains a vertex at every knot. None: G is the identity.
+    warp: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         path = np.array(self.path, dtype=float)
@@ -262,13 +269,15 @@ class LineFormation:
                 "LineFormation: radio_range must be >= 2(1+sqrt 2) safety_margin (eq. 9)"
             )
         stations = self._checked_stations(fleet_size, float(lengths.sum()))
+        path, steps, lengths, formation_lengths = self._warped(path, steps, lengths)
         e0 = np.asarray(self.rows.start_direction, dtype=float)
         ek = np.asarray(self.rows.goal_direction, dtype=float)
         e0 = e0 / np.hypot(*e0)
         ek = ek / np.hypot(*ek)
 
-        cumulative = np.concatenate([[0.0], np.cumsum(lengths)])  # arc length of P_k from A
-        directions = np.concatenate([e0[None], steps / lengths[:, None], ek[None]])
+        # formation distance of P_k beyond A (its arc length unless warped)
+        cumulative = np.concatenate([[0.0], np.cumsum(formation_lengths)])
+        directions = np.concatenate([e0[None], steps / formation_lengths[:, None], ek[None]])
         spacing_c = collision_spacing(self.safety_margin)
         spacing_r = radio_spacing(self.safety_margin, self.radio_range)
         if self.spacing is not None:
@@ -304,6 +313,7 @@ class LineFormation:
         object.__setattr__(self, "path", _readonly(path))
         object.__setattr__(self, "fleet_size", fleet_size)
         object.__setattr__(self, "_lengths", _readonly(lengths))
+        object.__setattr__(self, "_arc_length", float(lengths.sum()))
         object.__setattr__(self, "_cumulative", _readonly(cumulative))
         object.__setattr__(self, "_directions", _readonly(directions))
         object.__setattr__(self, "_spacing_c", spacing_c)
@@ -327,6 +337,43 @@ class LineFormation:
         start_slots = path[0] - (rank * spacing_c)[:, None] * directions[0]
         object.__setattr__(self, "_start_slots", _readonly(start_slots))
         object.__setattr__(self, "_crossing_cache", None)  # (profile, prefix sums), see below
+
+    def _warped(self, path: np.ndarray, steps: np.ndarray, lengths: np.ndarray):
+        """`path`, its steps and their arc lengths with a vertex added at every interior knot
+        of `warp` (stored read-only), and each step's length in formation distance (G's
+        increase over it; the arc lengths without a warp)."""
+        if self.warp is None:
+            return path, steps, lengths, lengths
+        if self.stations is not None:
+            raise ValueError("LineFormation: warp is for A -> B formations (no stations)")
+        knots = np.array(self.warp, dtype=float)
+        arcs = np.concatenate([[0.0], np.cumsum(lengths)])
+        if (
+            knots.ndim != 2
+            or knots.shape[1] != 2
+            or len(knots) < 2
+            or not np.all(np.isfinite(knots))
+            or np.any(np.abs(knots[0]) > DISTANCE_TOLERANCE)
+            or abs(knots[-1, 0] - arcs[-1]) > DISTANCE_TOLERANCE
+            or np.any(np.diff(knots[:, 0]) <= DISTANCE_TOLERANCE)
+            or np.any(np.diff(knots[:, 1]) < np.diff(knots[:, 0]) - DISTANCE_TOLERANCE)
+        ):
+            raise ValueError(
+                "LineFormation: warp must be (M, 2) knots from (0, 0) to (len(P), G) with "
+                "increasing arc lengths and slope >= 1"
+            )
+        knots[0], knots[-1, 0] = 0.0, arcs[-1]
+        object.__setattr__(self, "warp", _readonly(knots))
+        inner = knots[1:-1, 0]
+        inner = inner[np.min(np.abs(inner[:, None] - arcs[None, :]), axis=1) > DISTANCE_TOLERANCE]
+        if len(inner):
+            merged = np.sort(np.concatenate([arcs, inner]))
+            path = np.column_stack([np.interp(merged, arcs, path[:, k]) for k in (0, 1)])
+            arcs = merged
+            steps = np.diff(path, axis=0)
+            lengths = np.diff(arcs)
+        formation = np.interp(arcs, knots[:, 0], knots[:, 1])
+        return path, steps, lengths, np.diff(formation)
 
     def _checked_stations(self, fleet_size: int, path_length: float) -> np.ndarray | None:
         """`stations` validated (and stored read-only, clipped to len(P)), `return_distance`
@@ -398,6 +445,11 @@ class LineFormation:
     @property
     def path_length(self) -> float:
         """len(P) (eq. 12)."""
+        return self._arc_length
+
+    @property
+    def formation_length(self) -> float:
+        """G(len(P)): the formation distance from A to B; len(P) unless `warp`ed."""
         return float(self._cumulative[-1])
 
     @property
@@ -412,7 +464,8 @@ class LineFormation:
 
     @property
     def segment_directions(self) -> np.ndarray:
-        """(K+1, 2): e_0 (start row, towards A), e_1 .. e_{K-1} (path), e_K (goal row)."""
+        """(K+1, 2): e_0 (start row, towards A), e_1 .. e_{K-1} (path), e_K (goal row): unit
+        vectors, dV_n/dS on each piece; shorter (1 / G') on a `warp`ed path's steep pieces."""
         return self._directions
 
     @property
@@ -430,7 +483,7 @@ class LineFormation:
         Station formations: S_out (everyone on its station), 2 M returning (everyone
         back on its start slot)."""
         if self.stations is None:
-            return self.path_length + (self.fleet_size - 1) * self._spacing_r
+            return self.formation_length + (self.fleet_size - 1) * self._spacing_r
         return 2.0 * self._mirror if self.returning else self._outbound
 
     @property
@@ -527,7 +580,7 @@ class LineFormation:
         a return, the mirrored phases follow, 2 (path, homewards), 1 (start row), and 0 parked
         on its start slot again. A UAV is in the phase it leaves until S exceeds the
         threshold."""
-        count = len(self.path)
+        count = len(self._cumulative)
         table = np.array([0, 1] + [2] * (count - 1) + [3, 4])
         if self.returning:
             table = np.concatenate([table, table[-2::-1]])
@@ -546,12 +599,13 @@ class LineFormation:
 
     @property
     def path_arcs(self) -> np.ndarray:
-        """(K,): arc length of each path point P_k from A (0 at A, len(P) at the end)."""
+        """(K,): formation distance beyond A of each path point P_k (0 at A; its arc length
+        from A, G(arc) on a `warp`ed path, whose points include the knots)."""
         return self._cumulative
 
     def point_at(self, beyond) -> np.ndarray:
-        """Point at arc length `beyond` from A on the path extended by both rows (negative: on
-        the start row, behind A): shape beyond.shape + (2,)."""
+        """Point at formation distance `beyond` from A (arc length unless `warp`ed) on the path
+        extended by both rows (negative: on the start row, behind A): beyond.shape + (2,)."""
         return self._point_at(np.asarray(beyond, dtype=float))
 
     def _point_at(self, beyond: np.ndarray) -> np.ndarray:

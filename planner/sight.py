@@ -120,23 +120,99 @@ def chord_reach(
     A pair whose two samples lie on one straight piece of the polyline is not tested when
     that piece keeps the margin: its chord is part of the piece. Only pairs round a bend are
     (on planned paths, whose pieces keep rho_c from every building, most pairs are not)."""
-    points = _straight_runs(np.asarray(polyline, float).reshape(-1, 2))
-    pieces = np.diff(points, axis=0)
-    lengths = np.hypot(pieces[:, 0], pieces[:, 1])
-    arcs = np.concatenate([[0.0], np.cumsum(lengths)])
-    grid = np.append(np.arange(0.0, arcs[-1], step), arcs[-1])
-    samples = np.column_stack(
-        [np.interp(grid, arcs, points[:, 0]), np.interp(grid, arcs, points[:, 1])]
-    )
-    margin = step / 2.0
-    piece_clear = sight.clear(points[:-1], points[1:], margin)
-    piece = np.clip(np.searchsorted(arcs, grid, side="right") - 1, 0, max(len(pieces) - 1, 0))
+    samples = _PathSamples.of(polyline, sight, step)
     most = int(np.ceil(limit / step)) + 1
-    for gap in range(1, min(most, len(samples) - 1) + 1):
-        test = np.flatnonzero(~((piece[:-gap] == piece[gap:]) & piece_clear[piece[gap:]]))
-        if len(test) and not np.all(sight.clear(samples[test], samples[test + gap], margin)):
+    for gap in range(1, min(most, len(samples.grid) - 1) + 1):
+        test = np.flatnonzero(samples.tested(gap))
+        if len(test) and not np.all(samples.clear(test, gap)):
             return max((gap - 2) * step, 0.0)
     return float(limit)
+
+
+def clear_gaps(
+    polyline: np.ndarray, sight: Sight, limit: float, step: float = REACH_STEP_M
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample's line of sight back along `polyline`: its samples' arc lengths (every
+    `step`, and the end) and, per sample j, the number G_j of gaps g = 1 .. G_j for which the
+    pair (j - g, j) keeps the margin step / 2 (as `chord_reach` tests them, up to `limit`
+    of arc); G_j = j when every sample behind j is seen. A point x behind a point y sees it
+    when their nearest samples i <= j have j - i <= G_j (the chord is within step / 2 of
+    the tested one): the elastic formation's links (`planner.elastic`)."""
+    samples = _PathSamples.of(polyline, sight, step)
+    count = len(samples.grid)
+    most = min(int(np.ceil(limit / step)) + 1, count - 1)
+    gaps = np.arange(count)  # seen back to the start until a blocked pair says otherwise
+    open_ = np.ones(count, bool)
+    for low in range(1, most + 1, _GAP_BLOCK):  # a block of gaps per call: fewer, bigger calls
+        block = np.arange(low, min(low + _GAP_BLOCK, most + 1))
+        ends = np.flatnonzero(open_[low:]) + low
+        if len(ends) == 0:
+            break
+        end, gap = (a.ravel() for a in np.meshgrid(ends, block, indexing="ij"))
+        keep = end - gap >= 0
+        end, gap = end[keep], gap[keep]
+        keep = samples.piece_pair_tested(end - gap, end)
+        end, gap = end[keep], gap[keep]
+        blocked = ~samples.sight.clear(
+            samples.points[end - gap], samples.points[end], samples.margin
+        )
+        first = np.full(count, most + 1)
+        np.minimum.at(first, end[blocked], gap[blocked])
+        newly = first <= most
+        gaps[newly] = first[newly] - 1
+        open_[newly] = False
+    seen_limit = open_ & (gaps > most)
+    gaps[seen_limit] = most
+    return samples.grid, gaps
+
+
+#: `clear_gaps` tests this many gaps per call.
+_GAP_BLOCK = 16
+
+
+@dataclass(frozen=True, eq=False)
+class _PathSamples:
+    """A polyline sampled every `step` of arc length (`grid`, `points`), with what it takes to
+    test pairs of samples `gap` apart at the margin step / 2."""
+
+    grid: np.ndarray
+    points: np.ndarray
+    piece: np.ndarray  # the straight piece of each sample
+    piece_clear: np.ndarray  # whether that piece keeps the margin
+    sight: Sight
+    margin: float
+
+    @classmethod
+    def of(cls, polyline: np.ndarray, sight: Sight, step: float) -> _PathSamples:
+        points = _straight_runs(np.asarray(polyline, float).reshape(-1, 2))
+        pieces = np.diff(points, axis=0)
+        lengths = np.hypot(pieces[:, 0], pieces[:, 1])
+        arcs = np.concatenate([[0.0], np.cumsum(lengths)])
+        grid = np.append(np.arange(0.0, arcs[-1], step), arcs[-1])
+        samples = np.column_stack(
+            [np.interp(grid, arcs, points[:, 0]), np.interp(grid, arcs, points[:, 1])]
+        )
+        margin = step / 2.0
+        piece_clear = sight.clear(points[:-1], points[1:], margin)
+        last = max(len(pieces) - 1, 0)
+        piece = np.clip(np.searchsorted(arcs, grid, side="right") - 1, 0, last)
+        return cls(grid, samples, piece, piece_clear, sight, margin)
+
+    def tested(self, gap: int) -> np.ndarray:
+        """(len - gap,) bool: whether the pair (i, i + gap) needs a test (`piece_pair_tested`)."""
+        return self.piece_pair_tested(
+            np.arange(len(self.grid) - gap), np.arange(gap, len(self.grid))
+        )
+
+    def piece_pair_tested(self, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+        """Whether each pair of samples needs a test; a pair on one straight piece that itself
+        keeps the margin does not (its chord is part of it)."""
+        piece = self.piece
+        return ~((piece[first] == piece[second]) & self.piece_clear[piece[second]])
+
+    def clear(self, first: np.ndarray, gap: int) -> np.ndarray:
+        """Whether the chords from samples `first` to `first + gap` keep the margin."""
+        return self.sight.clear(self.points[first], self.points[first + gap], self.margin)
 
 
 def _straight_runs(points: np.ndarray) -> np.ndarray:

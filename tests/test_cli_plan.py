@@ -232,10 +232,11 @@ def test_city_blocks_plan(gcs_main):
     result = gcs_main("mission", "plan", EXAMPLES / "city-blocks.yaml", "--json")
     assert result.returncode == 0, result.stderr
     plan = json.loads(result.stdout)
-    # line of sight (the example's rule): its corners taken wider, one UAV more than eq. 28
-    assert plan["valid"] and plan["fleet_size"] == plan["min_fleet_size"] + 1
+    # line of sight (the example's rule): corners taken wider and the UAVs closing up at
+    # them, one UAV more than eq. 28 (the rigid formation needs 64 on the shortest path)
+    assert plan["valid"] and plan["fleet_size"] == plan["min_fleet_size"] + 1 == 9
     connectivity = plan["connectivity"]
-    assert connectivity["rule"] == "line_of_sight"
+    assert connectivity["rule"] == "line_of_sight" and connectivity["spacing"] == "elastic"
     assert connectivity["los_connected_fraction"] == 1.0
 
 

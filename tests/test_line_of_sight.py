@@ -1,7 +1,8 @@
 """Connectivity by line of sight (docs/line-of-sight.md): every plan
 says how it stands under both rules (plan JSON `connectivity`, one warning line for a disk plan
 whose links pass through buildings); `connectivity.rule: line_of_sight` plans the rigid
-formation whose spacing is the path's chord reach, and every sampled instant of it is
+formation whose spacing is the path's chord reach or the elastic one that closes up at the
+corners, whichever needs fewer UAVs, and every sampled instant of it is
 connected by line of sight, checked by brute force (shapely and networkx, none of the code
 under test) on the examples, random buildings and a city grid; it is flown so in the fast
 mode; a fleet too small for it, or a stations mission, is refused with one line."""
@@ -77,27 +78,32 @@ def test_a_disk_plan_says_how_often_its_links_pass_through_buildings(gcs_main, c
     assert connectivity["eq28_fleet_size"] == 8
     assert 0.1 < connectivity["los_connected_fraction"] < 0.2  # 14.5 % measured by hand
     assert connectivity["rigid_los_fleet_size"] > 40  # the rigid baseline: 55 by hand
+    # closing up at the corners needs far fewer on the same path (17)
+    assert 8 < connectivity["elastic_los_fleet_size"] < connectivity["rigid_los_fleet_size"] / 2
+    assert connectivity["spacing"] == "rigid" and connectivity["warp_m"] is None
     warnings = [r.getMessage() for r in caplog.records if r.name == "gcs.connectivity"]
     assert len(warnings) == 1
     assert "connected by line of sight 14." in warnings[0]
-    assert f"needs {connectivity['rigid_los_fleet_size']} UAVs" in warnings[0]
+    assert f"needs {connectivity['elastic_los_fleet_size']} UAVs" in warnings[0]
     assert "connectivity.rule: line_of_sight" in warnings[0]
 
 
 def test_the_line_of_sight_plan_of_the_small_mission_is_connected_at_every_instant(tmp_path):
-    """Its corners taken three times wider (15 m), the path's chords are clear 98 m apart:
-    the 4 UAVs of eq. 28 keep line of sight, where the shortest path needs 10."""
+    """On the shortest path the rigid formation needs 10 UAVs (chords clear 35 m apart round
+    its corners); closing up at the corners, the 4 UAVs of eq. 28 keep line of sight on the
+    same path."""
     plan = plan_mission(load_mission(with_rule(tmp_path, EXAMPLES / "small.yaml")))
     disk = plan_mission(load_mission(EXAMPLES / "small.yaml"))
     assert plan.valid and plan.fleet_size == disk.fleet_size == 4
     assert plan_json(disk)["connectivity"]["rigid_los_fleet_size"] == 10
     data = plan_json(plan)["connectivity"]
     assert data["rule"] == "line_of_sight" and data["los_connected_fraction"] == 1.0
-    assert data["fleet_size"] == data["rigid_los_fleet_size"] == plan.fleet_size
-    assert data["corner_margin_m"] > plan.mission.safety_margin
-    assert plan.formation.radio_spacing == pytest.approx(data["los_reach_m"])
-    assert plan.path_plan.length_m > disk.path_plan.length_m and not plan.path_plan.certified
-    assert_connected_by_sight(plan)
+    assert data["fleet_size"] == data["elastic_los_fleet_size"] == plan.fleet_size
+    assert data["spacing"] == "elastic" and len(data["warp_m"]) > 2
+    assert data["corner_margin_m"] == plan.mission.safety_margin  # the shortest path
+    assert plan.path_plan.length_m == disk.path_plan.length_m and plan.path_plan.certified
+    assert plan.duration_s > disk.duration_s  # the UAVs wait at the corners
+    assert_connected_by_sight(plan, samples=600)
     # the disk plan is not: the brute force finds an instant cut off by a building
     with pytest.raises(AssertionError):
         assert_connected_by_sight(disk)
@@ -127,12 +133,13 @@ def test_flown_in_the_fast_mode_the_line_of_sight_plan_stays_connected_by_sight(
 
 
 def test_a_fixed_fleet_too_small_for_line_of_sight_is_refused_with_the_number(tmp_path, gcs_main):
-    """city-blocks: eq. 28 needs 8 UAVs, line of sight 10 (corners taken wider; 64 without)."""
+    """city-blocks: eq. 28 needs 8 UAVs, line of sight 9 (elastic, corners taken wider; the
+    rigid formation 64 on the shortest path)."""
     path = with_rule(tmp_path, EXAMPLES / "city-blocks.yaml", fleet={"size": 8})
     result = gcs_main("mission", "check", path)
     assert result.returncode == 2 and result.stderr.count("\n") == 1
     assert "fleet.size" in result.stderr and "for line of sight" in result.stderr
-    assert "at least 10 UAVs" in result.stderr
+    assert "at least 9 UAVs" in result.stderr and "elastic" in result.stderr
 
 
 def test_a_stations_mission_with_line_of_sight_is_refused(tmp_path, gcs_main):

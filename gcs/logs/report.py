@@ -268,6 +268,7 @@ def _formation(plan: dict, returned: dict | None = None) -> LineFormation | None
             rows=rows,
             stations=stations,
             spacing=(plan.get("connectivity") or {}).get("spacing_m"),
+            warp=(plan.get("connectivity") or {}).get("warp_m"),
         )
         if stations is not None and returned is not None:
             formation = formation.with_return(float(returned["distance"]))

@@ -9,6 +9,7 @@ medium that knows the buildings (`radio.buildings`: 3gpp-umi and cut): the share
 
 from __future__ import annotations
 
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -71,6 +72,24 @@ def _planned(path: Path, runs: int = 3):
     return plan, best
 
 
+#: City maps of `bench maps` (FLEETLINE_BENCH_MAPS=OUT, written by `bench.city_maps`) whose
+#: routes are under 2 km: planned under both rules as well, best of one.
+CITY_ROUTES = (
+    "mumbai-960m-1", "vienna-1.5km-1", "vienna-1.5km-2", "betshemesh-1.1km-1",
+    "betshemesh-2km-1", "betshemesh-2km-2", "betshemesh-2km-3", "betshemesh-2km-4",
+    "betshemesh-2km-heights", "terraced-1.3km",
+)  # fmt: skip
+
+
+def _sources() -> list[tuple[Path, int]]:
+    """The missions planned: the examples (best of 3), then the city maps if written."""
+    sources = [(EXAMPLES / name, 3) for name in MISSIONS]
+    for folder in filter(None, os.environ.get("FLEETLINE_BENCH_MAPS", "").split(":")):
+        routes = (Path(folder) / f"{name}.yaml" for name in CITY_ROUTES)
+        sources += [(route, 1) for route in routes if route.exists()]
+    return sources
+
+
 def main() -> None:
     unit = reference_seconds()
     table = Table(title=f"line of sight (R = {unit:.2f} s)")
@@ -81,9 +100,10 @@ def main() -> None:
     ):  # fmt: skip
         table.add_column(column, justify="left" if column == "mission" else "right")
     with tempfile.TemporaryDirectory() as folder:
-        for name in MISSIONS:
-            disk, disk_s = _planned(_variant(EXAMPLES / name, Path(folder), "disk"))
-            sight, sight_s = _planned(_variant(EXAMPLES / name, Path(folder), "line_of_sight"))
+        for source, runs in _sources():
+            name = source.name
+            disk, disk_s = _planned(_variant(source, Path(folder), "disk"), runs)
+            sight, sight_s = _planned(_variant(source, Path(folder), "line_of_sight"), runs)
             c, w = disk.connectivity, sight.connectivity
             limit = radio_spacing(disk.mission.safety_margin, disk.mission.radio_range)
             table.add_row(

@@ -309,14 +309,6 @@ def _formation(
     )
 
 
-def _extended_path(formation: LineFormation) -> np.ndarray:
-    """The polyline the UAVs fly: the start row's far end, A ... B, the goal row's far end."""
-    row = (formation.fleet_size - 1) * formation.collision_spacing
-    directions = formation.segment_directions
-    path = formation.path
-    return np.vstack([path[0] - row * directions[0], path, path[-1] + row * directions[-1]])
-
-
 @dataclass(frozen=True)
 class _SightOptions:
     """Both line-of-sight formations on one formation's path: the chord reach and the rigid
@@ -331,7 +323,7 @@ class _SightOptions:
         rho = mission.safety_margin
         limit = radio_spacing(rho, mission.radio_range)
         spacing_c = collision_spacing(rho)
-        polyline = _extended_path(formation)
+        polyline = formation.flown_polyline
         sight = Sight(mission.obstacles)
         reach = chord_reach(polyline, sight, limit)
         rigid = None
@@ -394,6 +386,7 @@ def _sight_spacing(
     rho = mission.safety_margin
     best: _SightPlan | None = None
     previous: int | None = None  # the fleet of the last candidate
+    why = ""  # why the shortest path has no line-of-sight formation
     for factor in CORNER_FACTORS:
         start = fixed or int(path_plan.fleet_size)
         if factor == 1.0:
@@ -403,7 +396,8 @@ def _sight_spacing(
             if wide is None or wide.length_m > WIDER_LENGTH * path_plan.length_m:
                 break
             candidate = _sight_plan(mission, problem, wide, start, progress, replan=False)
-        if candidate is None:
+        if isinstance(candidate, str):
+            why = why or candidate
             continue
         candidate = replace(candidate, corner_margin=factor * rho)
         key = (candidate.fleet_size, candidate.total_distance)
@@ -414,14 +408,12 @@ def _sight_spacing(
         if previous is not None and candidate.fleet_size >= previous:
             break  # wider corners stopped paying: the next would need as many, or more
         previous = candidate.fleet_size
-    spacing_c = collision_spacing(rho)
     if best is None:
         raise InputError(
             mission.source,
             "connectivity.rule",
-            "disk for this path: its chords stay clear of the buildings only up to the "
-            f"parking spacing dS_c = {spacing_c:.3g} m apart along it, even with its corners "
-            "taken wider, so no line-of-sight formation exists",
+            f"disk for this path: no line-of-sight formation exists ({why}; its corners taken "
+            "wider did not help)",
         )
     if fixed is not None and best.fleet_size > fixed:
         how = (
@@ -484,16 +476,21 @@ def _sight_plan(
     size: int,
     progress: Callable[[SearchProgress], bool],
     replan: bool,
-) -> _SightPlan | None:
+) -> _SightPlan | str:
     """The line-of-sight formation on `path_plan`'s path with the fewest UAVs, rigid or
     elastic (`_SightOptions`), the fleet grown with its rows until it suffices (the path
-    planned again for longer rows when `replan`, else dropped when they break it); None when
-    neither exists."""
+    planned again for longer rows when `replan`, else dropped when they break it); else why
+    not, as the end of a sentence."""
+    spacing_c = collision_spacing(mission.safety_margin)
     for _ in range(SIGHT_ROUNDS):
         options = _SightOptions.of(mission, _formation(mission, path_plan, size))
         best = options.best(mission)
         if best is None:
-            return None
+            return (
+                f"somewhere along it, parking rows included, its chords stay clear of the "
+                f"buildings only up to about the parking spacing dS_c = {spacing_c:.3g} m "
+                f"apart along it"
+            )
         need, total, spacing, warp = best
         if need <= size:
             total += (size - need) * (
@@ -506,12 +503,18 @@ def _sight_plan(
             # longer rows only remove edges: a path still valid with them is still shortest
             path_plan = replace(path_plan, fleet_size=size, rows=grown)
             continue
+        refusal = row_refusal(problem, grown)
+        if refusal is not None:  # the rows depend on A, B and the angles only: no path helps
+            return f"it needs {plural(size, 'UAV')}, and for them {refusal.message}"
         if not replan:
-            return None
+            return f"it needs {plural(size, 'UAV')}, whose parking rows cut its path"
         path_plan = plan_path(replace(problem, fleet_size=size), progress)
         if not path_plan.valid:
-            return None
-    return None
+            return (
+                f"it needs {plural(size, 'UAV')}, and with their parking rows "
+                f"{path_plan.reason or 'no path is valid'}"
+            )
+    return f"its fleet kept growing with its parking rows ({plural(size, 'UAV')} and more)"
 
 
 def _connectivity(

@@ -506,6 +506,19 @@ class LineFormation:
         return replace(self, return_distance=float(distance))
 
     @property
+    def flown_polyline(self) -> np.ndarray:
+        """(K+2, 2): the polyline the UAVs fly: the start row's far end (UAV N's slot), A ... B,
+        the goal row's far end (UAV 1's slot)."""
+        row = (self.fleet_size - 1) * self._spacing_c
+        return np.vstack(
+            [
+                self.path[0] - row * self._directions[0],
+                self.path,
+                self.path[-1] + row * self._directions[-1],
+            ]
+        )
+
+    @property
     def start_slots(self) -> np.ndarray:
         """(N, 2): P_0,n = A - (n-1) dS_c e_0 (eqs. 17, 27)."""
         return self._start_slots.copy()

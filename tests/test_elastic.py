@@ -25,15 +25,6 @@ from planner.sight import Sight
 from tests.planner_maps import square
 
 
-def extended(formation: LineFormation) -> np.ndarray:
-    """The flown polyline: the start row's far end, A ... B, the goal row's far end."""
-    row = (formation.fleet_size - 1) * formation.collision_spacing
-    directions = formation.segment_directions
-    path = formation.path
-    unit = directions / np.hypot(*directions.T)[:, None]
-    return np.vstack([path[0] - row * unit[0], path, path[-1] + row * unit[-1]])
-
-
 def elastic_formation(path, obstacles, rows, safety_margin, radio_range, fleet_size):
     """The elastic formation on `path` with the fleet it needs (grown with its rows), or None."""
     spacing_c = collision_spacing(safety_margin)
@@ -43,7 +34,7 @@ def elastic_formation(path, obstacles, rows, safety_margin, radio_range, fleet_s
         disk = LineFormation(path, size, safety_margin, radio_range, rows(size))
         row = (size - 1) * spacing_c
         warp = elastic_warp(
-            extended(disk), Sight(obstacles), row, row + disk.path_length, spacing_r, spacing_c
+            disk.flown_polyline, Sight(obstacles), row, row + disk.path_length, spacing_r, spacing_c
         )
         if warp is None:
             return None

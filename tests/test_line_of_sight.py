@@ -174,3 +174,40 @@ def test_through_a_medium_that_knows_buildings_the_disk_plan_breaks_and_the_sigh
     assert disk.run_json["radio"]["connected_fraction"] < 0.9
     assert sight.run_json["completed"] is True
     assert sight.run_json["radio"]["connected_fraction"] == 1.0
+
+
+SLALOM = """\
+version: 1
+name: slalom
+start: {x: 0, y: 0, theta_deg: 0}
+goal: {x: 300, y: 0, theta_deg: 0}
+safety_margin: 5
+radio_range: 120
+altitude: 20
+speed: {max: 5, cap_to_safe: true}
+connectivity: {rule: line_of_sight}
+obstacles:
+  - segment: [[100, -200], [100, 12]]
+  - segment: [[112, -12], [112, 200]]
+  - segment: [[124, -200], [124, 12]]
+  - segment: [[136, -12], [136, 200]]
+"""
+
+
+def test_a_mission_without_any_line_of_sight_formation_is_refused_saying_why(tmp_path, gcs_main):
+    """A slalom through four walls: eq. 28 needs 4 UAVs, line of sight 8 (they close up at
+    every gate). With a building 77 m behind A the parking row of 8 UAVs (104 m) does not
+    fit, and the refusal says so instead of blaming the chords."""
+    fits = tmp_path / "slalom.yaml"
+    fits.write_text(SLALOM)
+    result = gcs_main("mission", "plan", fits, "--json")
+    assert result.returncode == 0, result.stderr
+    plan = json.loads(result.stdout)
+    assert plan["fleet_size"] == 8 and plan["min_fleet_size"] == 4
+    assert plan["connectivity"]["spacing"] == "elastic"
+    blocked = tmp_path / "slalom-blocked.yaml"
+    blocked.write_text(SLALOM + "  - rectangle: {center: [-80, 0], size: [6, 60], angle_deg: 0}\n")
+    result = gcs_main("mission", "check", blocked)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1
+    assert "connectivity.rule" in result.stderr and "no line-of-sight formation" in result.stderr
+    assert "needs 8 UAVs" in result.stderr and "parking row behind A (104 m)" in result.stderr

@@ -10,6 +10,7 @@ medium that knows the buildings (`radio.buildings`: 3gpp-umi and cut): the share
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 import time
 from pathlib import Path
@@ -20,6 +21,7 @@ from rich.console import Console
 from rich.table import Table
 
 from bench.machine import reference_seconds
+from gcs.errors import InputError
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
 from planner.formation import radio_spacing
@@ -103,8 +105,19 @@ def main() -> None:
         for source, runs in _sources():
             name = source.name
             disk, disk_s = _planned(_variant(source, Path(folder), "disk"), runs)
-            sight, sight_s = _planned(_variant(source, Path(folder), "line_of_sight"), runs)
-            c, w = disk.connectivity, sight.connectivity
+            c = disk.connectivity
+            try:
+                sight, sight_s = _planned(_variant(source, Path(folder), "line_of_sight"), runs)
+            except InputError as refused:
+                table.add_row(
+                    name, str(c.eq28_fleet_size), f"{100 * c.los_connected_fraction:.1f} %",
+                    f"{c.rigid_los_fleet_size} ({c.los_reach_m:g}) / {c.elastic_los_fleet_size}",
+                    "", "", _refusal(str(refused)), "", f"{disk.path_plan.length_m:.0f} / -",
+                    f"{disk.duration_s:.0f} / -", f"{disk_s:.3f} / -", f"{disk_s / unit:.3f} / -",
+                    "",
+                )  # fmt: skip
+                continue
+            w = sight.connectivity
             limit = radio_spacing(disk.mission.safety_margin, disk.mission.radio_range)
             table.add_row(
                 name,
@@ -126,6 +139,13 @@ def main() -> None:
             )
     Console(width=200).print(table)
     Console(width=200).print(_flights())
+
+
+def _refusal(message: str) -> str:
+    """A line-of-sight refusal in a few words: the fleet it needed and what stopped it."""
+    match = re.search(r"it needs (\d+) UAVs", message)
+    why = "parking row" if "parking row" in message else "chords"
+    return f"refused ({match.group(1)} UAVs: {why})" if match else f"refused ({why})"
 
 
 #: The missions flown through a radio that knows buildings (fast mode), and the models.

@@ -22,7 +22,10 @@ optional; `"command": "speed"` may be added) -> `{"ok": true, "seq": 3, "effecti
 300}` (`at` optional) -> `{"ok": true, "effective_s": 300.0, "distance": 812.5}`; the relief
 of one UAV of a stations mission (`gcs relieve N`): `{"command": "relieve", "uav": 2}` ->
 `{"ok": true, "uav": 2, "effective_s": 123.4, "landing_xy": [x, y]}`; a refusal
-`{"ok": false, "reason": "..."}`. `ask_running_mission` is the client side of these commands.
+`{"ok": false, "reason": "..."}`. Every answer also says `"result"`: `accepted`, or why not
+(`bad_request`, `not_flying`, `landing`, `holding`, `refused`; `gcs.flight.answers`, where the
+core's typed answers become these lines). `ask_running_mission` is the client side of these
+commands.
 """
 
 from __future__ import annotations
@@ -35,6 +38,8 @@ import os
 import socket
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from gcs.flight.answers import OperatorAnswer
 
 log = logging.getLogger(__name__)
 
@@ -210,9 +215,10 @@ class OperatorRequest:
     command: str = "speed"
     uav: int | None = None
 
-    def reply(self, answer: dict) -> None:
+    def reply(self, answer: OperatorAnswer) -> None:
+        """Send `answer` back as its JSON line and close the connection."""
         try:
-            self.connection.sendall((json.dumps(answer) + "\n").encode())
+            self.connection.sendall((json.dumps(answer.to_json()) + "\n").encode())
         except OSError:
             pass
         finally:

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs.flight.answers import AnswerResult
 from gcs.flight.core import REJOIN_SETTLE_S, STILL_BEFORE_LANDING_S
 from gcs.flight.hold import HOLD_LAG_S
 from gcs.link import MemoryLink
@@ -227,9 +228,13 @@ def test_operator_requests_are_answered_and_flown_and_a_short_link_cut_is_ridden
     )
     assert "link_lost" not in kinds(run) and not any(s.startswith("freeze") for s in sources(run))
     first, refused, timed = run.operator_answers
-    assert first["ok"] is True and first["speed"] == 3.0
-    assert refused["ok"] is False and "99" in refused["reason"]
-    assert timed == {"ok": True, "seq": timed["seq"], "effective_s": 30.0, "speed": 6.0}
+    assert first.ok is True and first.speed == 3.0
+    assert refused.ok is False and "99" in refused.reason
+    assert timed.to_json() == {
+        "ok": True, "result": "accepted", "seq": timed.seq, "effective_s": 30.0, "speed": 6.0
+    }  # fmt: skip
+    assert refused.result is AnswerResult.REFUSED
+    assert refused.to_json() == {"ok": False, "result": "refused", "reason": refused.reason}
     operator = [c for c in run.speed_changes if c["source"] == "operator"]
     assert len(operator) == 2
     for change in operator:

@@ -53,10 +53,10 @@ def relieved(plan, on_station):
 
 def test_the_relief_is_accepted_once_everyone_holds_and_one_at_a_time(relieved, plan):
     early, accepted, second = relieved.operator_answers
-    assert early["ok"] is False and "holds its station" in early["reason"]
-    assert accepted["ok"] is True and accepted["uav"] == 2
-    assert accepted["landing_xy"] == pytest.approx(plan.formation.start_slots[-1].tolist())
-    assert second["ok"] is False and "one relief at a time" in second["reason"]
+    assert early.ok is False and "holds its station" in early.reason
+    assert accepted.ok is True and accepted.uav == 2
+    assert accepted.landing_xy == pytest.approx(plan.formation.start_slots[-1].tolist())
+    assert second.ok is False and "one relief at a time" in second.reason
 
 
 def test_the_relieved_flight_keeps_every_guarantee_and_everyone_lands(relieved, plan):
@@ -105,7 +105,7 @@ def holder(plan, on_station, tmp_path_factory):
 def test_a_holder_relieved_hands_its_point_to_the_uav_behind(holder, plan):
     run, _ = holder
     (answer,) = run.operator_answers
-    assert answer["ok"] is True
+    assert answer.ok is True
     data, rho = run.run_json, plan.mission.safety_margin
     assert data["completed"] is True, data["reason"]
     assert [p["uav"] for p in data["stations"]["points"]] == [4, 1]

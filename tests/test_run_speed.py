@@ -15,6 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from gcs.flight.answers import AnswerResult, OperatorAnswer, OperatorCommand
 from gcs.speed import (
     OperatorSocket,
     ScheduledChange,
@@ -115,9 +116,15 @@ def test_operator_socket_round_trip(tmp_path: Path):
         thread.start()
         (request,) = _poll_until_request(server)
         assert (request.speed, request.at, request.error) == (4.5, 30.0, None)
-        request.reply({"ok": True, "seq": 1, "effective_s": 30.0, "speed": 4.5})
+        request.reply(
+            OperatorAnswer(
+                OperatorCommand.SPEED, AnswerResult.ACCEPTED, seq=1, effective_s=30.0, speed=4.5
+            )
+        )
         thread.join(5)
-        assert answers["reply"]["ok"] is True
+        assert answers["reply"] == {
+            "ok": True, "result": "accepted", "seq": 1, "effective_s": 30.0, "speed": 4.5
+        }  # fmt: skip
         assert find_running_sockets(tmp_path) == [socket_path_for(log)]
     finally:
         server.close()
@@ -140,7 +147,11 @@ def test_operator_socket_with_a_path_too_long_for_sun_path(tmp_path: Path):
             raw.sendall(b'{"speed": "fast"}\n')
             (request,) = _poll_until_request(server)
             assert request.error and "speed must be a number" in request.error
-            request.reply({"ok": False, "reason": request.error})
+            request.reply(
+                OperatorAnswer.refused(
+                    OperatorCommand.SPEED, AnswerResult.BAD_REQUEST, request.error
+                )
+            )
             assert json.loads(raw.makefile().readline())["ok"] is False
     finally:
         server.close()

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gcs.flight.answers import AnswerResult, OperatorAnswer, OperatorCommand
 from gcs.flight.live import LiveLoop
 from gcs.flight.records import ReturnRecord
 from gcs.logs.logreader import read_recording
@@ -118,7 +119,7 @@ def test_the_fleet_holds_every_station_then_lands_on_its_start_slots(flown, plan
     ]
     # while holding, the formation stands still: the operator's speed change was refused
     (refused,) = flown.operator_answers
-    assert refused["ok"] is False and refused["reason"].startswith("every UAV holds its station")
+    assert refused.ok is False and refused.reason.startswith("every UAV holds its station")
     # nobody landed on a station: every landing came after the way home
     assert (flown.landed_s > stations["return_s"] + window).all()
     # while holding, each UAV sat on its station (true positions, within rho_c)
@@ -182,13 +183,13 @@ def test_the_return_is_recorded_and_the_report_flies_it_again(flown, plan, log):
 
 def test_a_return_asked_before_everyone_is_on_station_brings_everyone_home(early, plan):
     first, second = early.operator_answers
-    assert first["ok"] is True and first["effective_s"] == pytest.approx(20.5)
-    assert first["distance"] < plan.formation.outbound_distance
-    assert second["ok"] is False and "already returning" in second["reason"]
+    assert first.ok is True and first.effective_s == pytest.approx(20.5)
+    assert first.distance < plan.formation.outbound_distance
+    assert second.ok is False and "already returning" in second.reason
     assert_home(early, plan)
     assert_guarantees(early, plan)
     stations = early.run_json["stations"]
-    assert stations["return_s"] == first["effective_s"]
+    assert stations["return_s"] == first.effective_s
     assert stations["held_connected_fraction"] is None  # never all on station
     assert [c["source"] for c in early.speed_changes] == ["return", "return"]
 
@@ -196,7 +197,7 @@ def test_a_return_asked_before_everyone_is_on_station_brings_everyone_home(early
 def test_a_return_before_some_uavs_left_keeps_them_down(plan):
     """At 5 s: UAVs 2 and 3 are airborne over their slots (take-off lead), UAV 4 not yet."""
     run = fly_fast(plan, FastOptions(faults=Faults(operator_returns=((5.0, None),))))
-    assert run.operator_answers[0]["ok"] is True
+    assert run.operator_answers[0].ok is True
     assert_home(run, plan)
     assert_guarantees(run, plan)
     assert np.isnan(run.takeoff_s[3]) and not np.isnan(run.takeoff_s[:3]).any()
@@ -208,7 +209,7 @@ def test_a_return_is_refused_on_an_a_to_b_mission_and_while_everyone_lands(plan)
         a_to_b, FastOptions(time_limit_s=12.0, faults=Faults(operator_returns=((10.0, 11.0),)))
     )
     (answer,) = run.operator_answers
-    assert answer["ok"] is False and "no stations" in answer["reason"]
+    assert answer.ok is False and "no stations" in answer.reason
     assert "stations" not in run.run_json
     assert run.speed_changes[0]["source"] == "schedule"  # nothing else was issued
     landing = fly_fast(
@@ -219,7 +220,7 @@ def test_a_return_is_refused_on_an_a_to_b_mission_and_while_everyone_lands(plan)
         ),
     )
     (answer,) = landing.operator_answers
-    assert answer["ok"] is False and "the fleet is landing" in answer["reason"]
+    assert answer.ok is False and "the fleet is landing" in answer.reason
 
 
 def test_a_stations_plan_is_flown_by_its_own_fleet_only(plan):
@@ -241,7 +242,11 @@ def _ask(path: Path, request: dict) -> tuple:
         while not requests and time.monotonic() < deadline:
             requests = server.poll()
         (parsed,) = requests
-        parsed.reply({"ok": parsed.error is None, "echo": parsed.command})
+        command = OperatorCommand(parsed.command) if parsed.error is None else OperatorCommand.SPEED
+        if parsed.error is None:
+            parsed.reply(OperatorAnswer(command, AnswerResult.ACCEPTED, effective_s=1.0))
+        else:
+            parsed.reply(OperatorAnswer.refused(command, AnswerResult.BAD_REQUEST, parsed.error))
         client.join(5.0)
     finally:
         server.close()
@@ -252,14 +257,14 @@ def test_the_operator_socket_reads_return_requests_and_speed_requests_as_before(
     path = socket_path_for(tmp_path / "run.mcap")
     parsed, answer = _ask(path, {"command": "return", "at": 300})
     assert (parsed.command, parsed.at, parsed.speed, parsed.error) == ("return", 300.0, None, None)
-    assert answer == {"ok": True, "echo": "return"}
+    assert answer == {"ok": True, "result": "accepted", "effective_s": 1.0, "distance": None}
     parsed, _ = _ask(path, {"command": "return"})
     assert (parsed.command, parsed.at, parsed.error) == ("return", None, None)
     parsed, _ = _ask(path, {"speed": 5, "at": 120})
     assert (parsed.command, parsed.speed, parsed.at, parsed.error) == ("speed", 5.0, 120.0, None)
     parsed, answer = _ask(path, {"command": "go home"})
     assert parsed.error.startswith("bad request: command must be one of speed, return")
-    assert answer["ok"] is False
+    assert answer == {"ok": False, "result": "bad_request", "reason": parsed.error}
     parsed, _ = _ask(path, {"command": "return", "at": "soon"})
     assert parsed.command == "return" and parsed.error == "bad request: at must be a number"
 
@@ -274,13 +279,15 @@ def test_the_operator_socket_reads_relieve_requests(tmp_path):
         None,
         None,
     )
-    assert answer == {"ok": True, "echo": "relieve"}
+    assert answer == {
+        "ok": True, "result": "accepted", "uav": None, "effective_s": 1.0, "landing_xy": None
+    }  # fmt: skip
     for uav in (True, 2.0, "2", 0, -1, None):
         request = {"command": "relieve"} if uav is None else {"command": "relieve", "uav": uav}
         parsed, answer = _ask(path, request)
         assert (parsed.command, parsed.uav) == ("relieve", None)
         assert parsed.error == "bad request: uav must be a positive integer"
-        assert answer["ok"] is False
+        assert answer["ok"] is False and answer["result"] == "bad_request"
     parsed, _ = _ask(path, {"command": "return", "uav": 2})
     assert (parsed.command, parsed.uav, parsed.error) == ("return", None, None)
 
@@ -339,9 +346,15 @@ def test_gcs_relieve_is_refused_by_a_mission_not_flying_yet(gcs_main, plan, tmp_
         assert err.strip() == "gcs relieve: refused: the fleet is not flying yet"
         code, out, err = gcs_main("relieve", "3", "--socket", path, "--json")
         assert code == 1
-        assert json.loads(out) == {"ok": False, "reason": "the fleet is not flying yet"}
+        assert json.loads(out) == {
+            "ok": False, "result": "not_flying", "reason": "the fleet is not flying yet"
+        }  # fmt: skip
         answer = send_operator_command(path, {"command": "relieve", "uav": 1.5})
-        assert answer == {"ok": False, "reason": "bad request: uav must be a positive integer"}
+        assert answer == {
+            "ok": False,
+            "result": "bad_request",
+            "reason": "bad request: uav must be a positive integer",
+        }
     finally:
         stop.set()
         server.join(5.0)

@@ -63,6 +63,7 @@ import numpy as np
 from fleetwire.messages import parse_clock_slipped
 from gcs.drivers.base import Driver, DriverEvent, Phase
 from gcs.drivers.limits import LimitExceeded, exceeded
+from gcs.flight.answers import AnswerResult, OperatorAnswer, OperatorCommand
 from gcs.flight.clock import MissionClock, VehicleClock, paused
 from gcs.flight.hold import Hold, HoldPolicy, UavState
 from gcs.flight.records import (
@@ -720,58 +721,78 @@ class GroundStation:
 
     def operator_request(
         self, speed: float | None, at: float | None, error: str | None, now: float
-    ) -> dict:
-        """A request of `gcs speed` (the operator socket); returns the answer to send back."""
-        if error:
-            return {"ok": False, "reason": error}
-        if self.aborting:
-            return {"ok": False, "reason": f"the fleet is landing ({self.reason})"}
-        if self._holding():
-            return {"ok": False, "reason": _HOLDING}
+    ) -> OperatorAnswer:
+        """A request of `gcs speed` (the operator socket): the answer to send back."""
+        command = OperatorCommand.SPEED
+        refused = self._operator_refusal(command, error, flying=False)
+        if refused is not None:
+            return refused
         t = self.clock.mission_time(now) if self.clock.anchored else 0.0
         try:
             change = self.speeds.request(speed, t, "operator", at)
-        except SpeedRefused as refused:
-            return {"ok": False, "reason": str(refused)}
+        except SpeedRefused as why:
+            return OperatorAnswer.refused(command, AnswerResult.REFUSED, str(why))
         self._apply(change, now)
-        return {
-            "ok": True,
-            "seq": change.seq,
-            "effective_s": change.effective_s,
-            "speed": change.speed,
-        }
+        return OperatorAnswer(
+            command,
+            AnswerResult.ACCEPTED,
+            seq=change.seq,
+            effective_s=change.effective_s,
+            speed=change.speed,
+        )
 
-    def operator_return(self, at: float | None, error: str | None, now: float) -> dict:
-        """A request of `gcs return` (the operator socket); returns the answer to send back:
-        `{"ok": true, "effective_s": t_e, "distance": M}` or `{"ok": false, "reason": ...}`."""
-        if error:
-            return {"ok": False, "reason": error}
-        if not self.clock.anchored:
-            return {"ok": False, "reason": "the fleet is not flying yet"}
+    def operator_return(self, at: float | None, error: str | None, now: float) -> OperatorAnswer:
+        """A request of `gcs return` (the operator socket): the answer to send back (the
+        formation distance M it flies home from)."""
+        command = OperatorCommand.RETURN
+        refused = self._operator_refusal(command, error, flying=True)
+        if refused is not None:
+            return refused
         try:
             record = self._return_home(self.clock.mission_time(now), now, at, "operator")
-        except ReturnRefused as refused:
-            return {"ok": False, "reason": str(refused)}
-        return {"ok": True, "effective_s": record.effective_s, "distance": record.distance}
+        except ReturnRefused as why:
+            return OperatorAnswer.refused(command, AnswerResult.REFUSED, str(why))
+        return OperatorAnswer(
+            command, AnswerResult.ACCEPTED, effective_s=record.effective_s, distance=record.distance
+        )
 
-    def operator_relieve(self, uav: int | None, error: str | None, now: float) -> dict:
-        """A request of `gcs relieve N` (the operator socket); returns the answer to send back:
-        `{"ok": true, "uav": n, "effective_s": t, "landing_xy": [x, y]}` or `{"ok": false,
-        "reason": ...}`."""
-        if error:
-            return {"ok": False, "reason": error}
-        if not self.clock.anchored:
-            return {"ok": False, "reason": "the fleet is not flying yet"}
+    def operator_relieve(self, uav: int | None, error: str | None, now: float) -> OperatorAnswer:
+        """A request of `gcs relieve N` (the operator socket): the answer to send back (where
+        the relieved UAV lands)."""
+        command = OperatorCommand.RELIEVE
+        refused = self._operator_refusal(command, error, flying=True)
+        if refused is not None:
+            return refused
         try:
             plan = self._relieve(self.clock.mission_time(now), now, uav, "operator")
-        except ReliefRefused as refused:
-            return {"ok": False, "reason": str(refused)}
-        return {
-            "ok": True,
-            "uav": uav,
-            "effective_s": plan.start_s,
-            "landing_xy": [float(v) for v in plan.landing_xy],
-        }
+        except ReliefRefused as why:
+            return OperatorAnswer.refused(command, AnswerResult.REFUSED, str(why))
+        landing = (float(plan.landing_xy[0]), float(plan.landing_xy[1]))
+        return OperatorAnswer(
+            command, AnswerResult.ACCEPTED, uav=uav, effective_s=plan.start_s, landing_xy=landing
+        )
+
+    def _operator_refusal(
+        self, command: OperatorCommand, error: str | None, flying: bool
+    ) -> OperatorAnswer | None:
+        """The answer refusing an operator request before its own rules are asked: a request
+        that could not be read; a return or relief before take-off (`flying`); a speed
+        change while the fleet lands or holds its stations."""
+        if error:
+            return OperatorAnswer.refused(command, AnswerResult.BAD_REQUEST, error)
+        if flying:
+            if not self.clock.anchored:
+                return OperatorAnswer.refused(
+                    command, AnswerResult.NOT_FLYING, "the fleet is not flying yet"
+                )
+            return None
+        if self.aborting:
+            return OperatorAnswer.refused(
+                command, AnswerResult.LANDING, f"the fleet is landing ({self.reason})"
+            )
+        if self._holding():
+            return OperatorAnswer.refused(command, AnswerResult.HOLDING, _HOLDING)
+        return None
 
     def operator_command(self, line: str, now: float) -> None:
         """A line typed in the live view: a speed (m/s) [@T], return [@T], or 'land'."""

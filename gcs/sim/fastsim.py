@@ -30,6 +30,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.drivers.base import DriverTiming, UavSpec
 from gcs.drivers.sim import SimDriver
+from gcs.flight.answers import OperatorAnswer
 from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, NullRecorder, RunOptions, RunResult
 from gcs.link import MemoryLink
@@ -134,7 +135,7 @@ class FastRun:
     mission s; `kind` indexes `medium.radio_stats.KINDS`); `speed_changes` each change with
     the mission time each UAV received it (`received_s`) and, for a leader's request, the time
     the leader sent it (`leader_sent_s`); `takeoff_s` and `landed_s` (N,) mission times (NaN:
-    never); `operator_answers` the answers to `Faults.operator_requests`, `operator_returns`
+    never); `operator_answers` the typed answers (`gcs.flight.answers`) to `Faults.operator_requests`, `operator_returns`
     and `operator_reliefs`, in the order asked; `stalls` the core's stall records;
     `battery_remaining_pct` (N,) the last battery level (%, SYS_STATUS) each UAV reported
     (NaN: none).
@@ -153,7 +154,7 @@ class FastRun:
     speed_changes: list[dict]
     takeoff_s: np.ndarray
     landed_s: np.ndarray
-    operator_answers: list[dict] = field(default_factory=list)
+    operator_answers: list[OperatorAnswer] = field(default_factory=list)
     stalls: list = field(default_factory=list)  # the core's `Stall` records
     battery_remaining_pct: np.ndarray = field(default_factory=lambda: np.empty(0))
 
@@ -310,7 +311,7 @@ class _LockstepMission:
         self.leader_sent_s: dict[int, list[float]] = {}  # UAV -> its requests, first sent at
         self._leader_seen: set[tuple[int, int]] = set()
         self.sim_zero = math.inf  # simulated s at mission time 0 (before any stall)
-        self.operator_answers: list[dict] = []
+        self.operator_answers: list[OperatorAnswer] = []
         self._arrived: dict[int, list] = {}  # what waits in the ground station's buffers
         self._times: list[float] = []
         self._positions: list[np.ndarray] = []

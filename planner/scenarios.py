@@ -27,6 +27,10 @@ from planner.formation import row_direction
 from planner.obstacles import Obstacles
 from planner.types import PathProblem
 
+#: The paper's varying-speed runs (sec. V): the leader asks for these speeds, (mission time
+#: it asks, speed m/s); `gcs eval paper` and the study file's `leader` axis fly them.
+LEADER_REQUESTS = ((30.0, 5.0), (90.0, 10.0), (150.0, 2.0), (210.0, 10.0))
+
 #: Extra clearance (m) random rectangles keep from A, B and the rows, beyond the margin.
 _SPARE = 1.0
 

@@ -75,13 +75,13 @@ from gcs.flight.records import (
     SpeedRecord,
     SpeedRecordKind,
     UavStateRecord,
+    run_json_radio,
 )
 from gcs.flight.roster import Roster
 from gcs.flight.stall import Resume, resume_point
 from gcs.geodesy import enu_to_geodetic
 from gcs.link import mavutil
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
-from gcs.sim.radio import run_json_radio
 from gcs.speed import (
     ScheduledChange,
     SpeedBroadcast,

@@ -208,3 +208,14 @@ class ReliefRecord(_Record):
     stations: list[float | None]
     holders: list[int]
     members: list[int]
+
+
+#: The radio medium's report fields the run JSON's `radio` object keeps (docs/outputs.md).
+RUN_JSON_KEYS = ("connected_fraction", "packets", "delay_ms", "ground_users", "hops", "per_uav")
+
+
+def run_json_radio(report: dict | None) -> dict | None:
+    """The run JSON's `radio` object from the medium's last report."""
+    if report is None:
+        return None
+    return {key: report[key] for key in RUN_JSON_KEYS if key in report}

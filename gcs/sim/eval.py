@@ -36,6 +36,7 @@ from gcs.mission import Mission, SpeedChange, SpeedSchedule, load_mission  # noq
 from gcs.planning import plan_mission  # noqa: E402
 from gcs.sim.fastsim import FastOptions, FastRun, fly_fast  # noqa: E402
 from medium.radio_stats import KINDS  # noqa: E402
+from planner.scenarios import LEADER_REQUESTS  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_MISSION = REPO / "examples" / "table-ii.yaml"
@@ -53,9 +54,6 @@ PAPER = {
         10.0: {"sent": 930, "received": None, "dropped": 243, "ratio": 0.627},
     },
 }
-
-#: The leader's requests of the varying-speed runs: (mission time it asks, speed).
-LEADER_REQUESTS = ((30.0, 5.0), (90.0, 10.0), (150.0, 2.0), (210.0, 10.0))
 
 
 @dataclass(frozen=True)

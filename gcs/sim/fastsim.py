@@ -33,9 +33,10 @@ from gcs.drivers.sim import SimDriver
 from gcs.flight.answers import OperatorAnswer
 from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, NullRecorder, RunOptions, RunResult
+from gcs.flight.records import run_json_radio
 from gcs.link import MemoryLink
 from gcs.planning import MissionPlan, plan_json
-from gcs.sim.radio import buildings_sight, run_json_radio
+from gcs.sim.radio import buildings_sight
 from gcs.summary import run_json
 from medium.ground_users import DEFAULT_PACKET_BYTES, GroundUser
 from medium.medium import MediumModel

@@ -29,7 +29,6 @@ from planner.sight import Sight, sight_json
 log = logging.getLogger(__name__)
 
 #: The run JSON's `radio` keys (docs/outputs.md), plus our extras.
-RUN_JSON_KEYS = ("connected_fraction", "packets", "delay_ms", "ground_users", "hops", "per_uav")
 MAX_REPORT_BYTES = 65535
 MAX_REPORTS_PER_POLL = 100
 
@@ -99,13 +98,6 @@ def model_args(setup: MediumSetup) -> list[str]:
     if setup.calibration is not None:
         args += ["--calibration", str(setup.calibration)]
     return args
-
-
-def run_json_radio(report: dict | None) -> dict | None:
-    """The run JSON's `radio` object from the medium's last report."""
-    if report is None:
-        return None
-    return {key: report[key] for key in RUN_JSON_KEYS if key in report}
 
 
 def _points(points) -> str:

@@ -30,7 +30,7 @@ from gcs.mission import (
     parse_yaml,
     read_yaml,
 )
-from gcs.sim.eval import LEADER_REQUESTS
+from planner.scenarios import LEADER_REQUESTS
 from planner.types import METHODS
 
 #: The only study file version this code reads.

@@ -54,7 +54,7 @@ def _frames(count: int) -> tuple[bytes, list[list[bytes]], list[bytes]]:
     gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     heartbeat = mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(gcs)
     setup, setpoints = [], []
-    origin = (DEFAULT_ORIGIN.latitude_deg, DEFAULT_ORIGIN.longitude_deg, DEFAULT_ORIGIN.altitude_m)
+    origin = (DEFAULT_ORIGIN.lat, DEFAULT_ORIGIN.lon, DEFAULT_ORIGIN.alt)
     for k in range(count):
         sysid = k + 1
         setup.append(

@@ -33,7 +33,7 @@ from functools import cached_property
 
 import numpy as np
 import pymap3d
-from pymap3d.ecef import geodetic2ecef
+from pymap3d.ecef import geodetic2ecef, uvw2enu
 
 #: WGS84, the ellipsoid pymap3d uses by default: semi-major and semi-minor axes (m).
 _WGS84 = pymap3d.Ellipsoid.from_name("wgs84")
@@ -160,3 +160,36 @@ def _ecef_to_geodetic(x: np.ndarray, y: np.ndarray, z: np.ndarray):
         inside = x**2 / _A**2 + y**2 / _A**2 + z**2 / _B**2 < 1
         alt = np.where(inside, -alt, alt)
     return np.degrees(lat), np.degrees(lon), alt
+
+
+@dataclass(frozen=True)
+class Origin:
+    """Geodetic anchor of the local frame, for the ground station and the vehicles alike:
+    latitude, longitude (degrees), altitude (m, AMSL) of local (0, 0, 0)."""
+
+    lat: float
+    lon: float
+    alt: float
+
+    @cached_property
+    def enu_frame(self) -> EnuFrame:
+        """The local frame this origin anchors (ENU <-> WGS84)."""
+        return EnuFrame(self.lat, self.lon, self.alt)
+
+    def to_geodetic(self, enu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(N, 3) local ENU -> latitude deg, longitude deg, altitude m arrays."""
+        enu = np.asarray(enu, dtype=float).reshape(-1, 3)
+        return self.enu_frame.to_geodetic(enu[:, 0], enu[:, 1], enu[:, 2])
+
+    @cached_property
+    def _ecef(self) -> tuple[float, float, float]:
+        x, y, z = geodetic2ecef(self.lat, self.lon, self.alt)
+        return float(x), float(y), float(z)
+
+    def to_local(self, lat: float, lon: float, alt: float) -> np.ndarray:
+        """One geodetic point -> local ENU (3,): pymap3d's geodetic2enu with the origin's ECEF
+        cached (the vehicles' setpoints in the global frame)."""
+        x, y, z = geodetic2ecef(lat, lon, alt)
+        x0, y0, z0 = self._ecef
+        east, north, up = uvw2enu(x - x0, y - y0, z - z0, self.lat, self.lon)
+        return np.array([float(east), float(north), float(up)])

@@ -8,26 +8,18 @@ core converts every tick's setpoints), shared with the simulated vehicles.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import cached_property
-
 import numpy as np
 
-from fleetwire.geodesy import EnuFrame
+from fleetwire.geodesy import Origin
 
-
-@dataclass(frozen=True)
-class Origin:
-    """Geodetic anchor of the local frame: latitude, longitude (degrees), altitude (m, AMSL)."""
-
-    lat: float
-    lon: float
-    alt: float
-
-    @cached_property
-    def enu_frame(self) -> EnuFrame:
-        """The local frame this origin anchors (ENU -> WGS84)."""
-        return EnuFrame(self.lat, self.lon, self.alt)
+__all__ = [
+    "Origin",
+    "enu_to_geodetic",
+    "geodetic_point_to_enu",
+    "geodetic_to_enu",
+    "local_to_lonlat",
+    "lonlat_to_local",
+]
 
 
 def geodetic_to_enu(

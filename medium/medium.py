@@ -35,6 +35,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from fleetwire.frames import frames
+from fleetwire.geodesy import Origin
 from fleetwire.worldclock import FollowerClock, WorldClockFollower
 from medium.ground_users import (
     DEFAULT_PACKET_BYTES,
@@ -45,7 +46,6 @@ from medium.ground_users import (
 )
 from medium.radio import Channel, DelayLine, RadioConfig, Topology, topology
 from medium.radio_stats import RadioStats
-from vehicles.frames import GeodeticOrigin
 
 log = logging.getLogger(__name__)
 
@@ -80,7 +80,7 @@ class MediumConfig:
     radio: RadioConfig
     stations: tuple[tuple[float, float], ...]
     uavs: tuple[MediumUav, ...]
-    origin: GeodeticOrigin
+    origin: Origin
     speedup: float = 1.0
     host: str = "127.0.0.1"
     ground_users: tuple[GroundUser, ...] = ()
@@ -92,9 +92,7 @@ class MediumConfig:
     world_slot: int = 0
 
 
-def sim_state_position(
-    payload: bytes, origin: GeodeticOrigin
-) -> tuple[np.ndarray, np.ndarray] | None:
+def sim_state_position(payload: bytes, origin: Origin) -> tuple[np.ndarray, np.ndarray] | None:
     """True local (x, y) and velocity (east, north) from a `SIM_STATE` payload (MAVLink 2
     trims trailing zeros: they are put back); None if it holds no finite position."""
     size = _SIM_STATE.unpacker.size
@@ -107,7 +105,7 @@ def sim_state_position(
         lat, lon = values[f["lat"]], values[f["lon"]]
     if not (math.isfinite(lat) and math.isfinite(lon)):
         return None
-    local = origin.to_local(lat, lon, origin.altitude_m)
+    local = origin.to_local(lat, lon, origin.alt)
     velocity = np.array([values[f["ve"]], values[f["vn"]]], dtype=float)
     if not np.isfinite(velocity).all():
         velocity = np.zeros(2)

@@ -9,9 +9,8 @@ import numpy as np
 import pymap3d
 import pytest
 
-from fleetwire.geodesy import EnuFrame
-from gcs.geodesy import Origin, enu_to_geodetic, geodetic_point_to_enu
-from vehicles.frames import GeodeticOrigin
+from fleetwire.geodesy import EnuFrame, Origin
+from gcs.geodesy import enu_to_geodetic, geodetic_point_to_enu
 
 
 def _cases():
@@ -60,7 +59,7 @@ def test_the_ground_station_and_the_vehicles_share_the_conversion():
     origin = Origin(45.764, 4.8357, 170.0)
     xyz = np.array([[0.0, 0.0, 0.0], [300.0, -120.0, 30.0], [1500.0, 900.0, 45.0]])
     station = enu_to_geodetic(xyz[:, 0], xyz[:, 1], xyz[:, 2], origin)
-    vehicles = np.column_stack(GeodeticOrigin(45.764, 4.8357, 170.0).to_geodetic(xyz))
+    vehicles = np.column_stack(Origin(45.764, 4.8357, 170.0).to_geodetic(xyz))
     assert np.array_equal(station, vehicles)
     theirs = np.column_stack(
         pymap3d.enu2geodetic(xyz[:, 0], xyz[:, 1], xyz[:, 2], 45.764, 4.8357, 170.0)

@@ -13,13 +13,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.geodesy import Origin
 from medium.ground_users import CbrTraffic, GroundUser
 from medium.medium import MediumModel, frames, sim_state_position
 from medium.radio import Channel, DelayLine, RadioConfig, topology
 from medium.radio_stats import RadioStats
-from vehicles.frames import GeodeticOrigin
 
-ORIGIN = GeodeticOrigin(45.7640, 4.8357, 170.0)
+ORIGIN = Origin(45.7640, 4.8357, 170.0)
 coordinate = st.floats(-300, 300, allow_nan=False)
 points = st.lists(st.tuples(coordinate, coordinate), min_size=0, max_size=12)
 

@@ -20,7 +20,7 @@ from vehicles.autopilot import AutopilotConfig, FailsafeConfig, Guided, Mode
 from vehicles.autopilot import ftp as mavftp
 from vehicles.sim import DEFAULT_ORIGIN
 
-LAT, LON, ALT = DEFAULT_ORIGIN.latitude_deg, DEFAULT_ORIGIN.longitude_deg, DEFAULT_ORIGIN.altitude_m
+LAT, LON, ALT = DEFAULT_ORIGIN.lat, DEFAULT_ORIGIN.lon, DEFAULT_ORIGIN.alt
 ACCEPTED, FAILED, DENIED = (
     mavlink.MAV_RESULT_ACCEPTED,
     mavlink.MAV_RESULT_FAILED,

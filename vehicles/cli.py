@@ -18,12 +18,12 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+from fleetwire.geodesy import Origin
 from fleetwire.messages import GCS_SYSTEM_ID
 from fleetwire.worldclock import WorldClockError, check_world_clock
 from vehicles.autopilot import AutopilotConfig, FailsafeConfig
 from vehicles.dynamics import Airframe, Disturbances, DynamicsConfig
 from vehicles.fleet_speed import LeaderRequest
-from vehicles.frames import GeodeticOrigin
 from vehicles.link import PortInUseError
 from vehicles.orphan import OrphanExit
 from vehicles.signing import KeyFileError, read_key_file
@@ -84,13 +84,13 @@ def _floats(flag: str, text: str, sizes: tuple[int, ...]) -> list[float]:
     return values
 
 
-def _home(text: str) -> GeodeticOrigin:
+def _home(text: str) -> Origin:
     lat, lon, alt = _floats("--home", text, (3,))
     if abs(lat) > 90 or abs(lon) > 180:
         raise InputError(
             f"--home: expected LAT,LON,ALT with |LAT| <= 90 and |LON| <= 180, got {text!r}"
         )
-    return GeodeticOrigin(lat, lon, alt)
+    return Origin(lat, lon, alt)
 
 
 def _wind(text: str) -> tuple[float, float, float]:

@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.geodesy import Origin
 from vehicles.autopilot import Autopilot, AutopilotConfig, Stamp
 from vehicles.dynamics import DynamicsConfig, FleetDynamics
 from vehicles.fleet_speed import LeaderRequest
-from vehicles.frames import GeodeticOrigin
 from vehicles.telemetry import FleetSnapshot
 
 #: Streams a ground station in the same process has no use for (it reads the truth directly):
@@ -39,7 +39,7 @@ class LockstepConfig:
 
     starts: tuple[tuple[float, float, float], ...]
     sysids: tuple[int, ...]
-    origin: GeodeticOrigin
+    origin: Origin
     seed: int = 0
     dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
     autopilot: AutopilotConfig = field(default_factory=AutopilotConfig)

@@ -31,18 +31,18 @@ from pathlib import Path
 
 import numpy as np
 
+from fleetwire.geodesy import Origin
 from fleetwire.worldclock import FollowerClock, WorldClockFollower
 from vehicles.autopilot import Autopilot, AutopilotConfig, Stamp
 from vehicles.dynamics import DynamicsConfig, FleetDynamics
 from vehicles.fleet_speed import LeaderRequest
-from vehicles.frames import GeodeticOrigin
 from vehicles.link import Address, VehicleLink
 from vehicles.signing import deliver_setup_signing, report_refusals
 from vehicles.telemetry import FleetSnapshot
 
 log = logging.getLogger(__name__)
 
-DEFAULT_ORIGIN = GeodeticOrigin(45.7640, 4.8357, 170.0)
+DEFAULT_ORIGIN = Origin(45.7640, 4.8357, 170.0)
 _EPOLL_RESOLUTION_S = 0.001
 _MAX_TICKS_PER_WAKE = 10
 #: Clock slips are reported at most this often (wall s), each report with the total since the
@@ -73,7 +73,7 @@ class SimConfig:
     out: Address | None = None
     speedup: float = 1.0
     seed: int = 0
-    origin: GeodeticOrigin = DEFAULT_ORIGIN
+    origin: Origin = DEFAULT_ORIGIN
     dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
     autopilot: AutopilotConfig = field(default_factory=AutopilotConfig)
     leader_sysid: int | None = None

@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.geodesy import Origin
 from fleetwire.messages import MISSION_TIME_NAME, encode_mission_time
 from fleetwire.modes import COPTER_MODE
 from vehicles.dynamics import GRAVITY_MPS2, FleetDynamics
-from vehicles.frames import GeodeticOrigin
 
 if TYPE_CHECKING:
     from vehicles.autopilot.status import AutopilotStatus
@@ -153,7 +153,7 @@ class FleetSnapshot:
     geodetic conversion runs vectorised once per tick; anything else is converted one by one.
     """
 
-    def __init__(self, dynamics: FleetDynamics, origin: GeodeticOrigin) -> None:
+    def __init__(self, dynamics: FleetDynamics, origin: Origin) -> None:
         self.dynamics = dynamics
         self.origin = origin
         self._estimated: dict[int, tuple[float, float, float]] = {}
@@ -163,7 +163,7 @@ class FleetSnapshot:
 
     @classmethod
     def for_due(
-        cls, dynamics: FleetDynamics, origin: GeodeticOrigin, due_lists: list[list[int]]
+        cls, dynamics: FleetDynamics, origin: Origin, due_lists: list[list[int]]
     ) -> FleetSnapshot:
         """The snapshot of a tick whose due messages are `due_lists` (per vehicle), with the
         geodetic positions they need already converted in one call."""

@@ -46,7 +46,6 @@ from planner.kinematics import LineFormation, SpeedProfile
 from vehicles.autopilot import AutopilotConfig
 from vehicles.dynamics import Airframe, Disturbances, DynamicsConfig
 from vehicles.fleet_speed import LeaderRequest
-from vehicles.frames import GeodeticOrigin
 from vehicles.lockstep import QUIET_STREAMS, LockstepConfig, LockstepFleet
 
 #: Streams the vehicles skip in the fast mode: what the core does not read.
@@ -248,7 +247,7 @@ class _LockstepMission:
             LockstepConfig(
                 starts=tuple(map(tuple, starts.tolist())),
                 sysids=tuple(range(1, size + 1)),
-                origin=GeodeticOrigin(origin.lat, origin.lon, origin.alt),
+                origin=origin,
                 seed=mission.sim.seed,
                 dynamics=mission_dynamics(mission),
                 # WPNAV_SPEED (the guided limit the driver reads) at the airframe's max speed

@@ -217,7 +217,7 @@ def _takeoff_point(ap: Autopilot, item: MissionItem) -> np.ndarray:
     if item.frame in missions.RELATIVE_FRAMES:
         point[2] = ap.home_enu[2] + item.z
     else:
-        point[2] = item.z - ap.origin.altitude_m
+        point[2] = item.z - ap.origin.alt
     return point
 
 

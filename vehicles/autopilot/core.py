@@ -19,6 +19,7 @@ from collections.abc import Callable
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.geodesy import Origin
 from fleetwire.messages import clock_slipped_text
 from vehicles import telemetry
 from vehicles.autopilot import (
@@ -37,7 +38,6 @@ from vehicles.autopilot.status import AutopilotStatus, BatteryState, battery_of
 from vehicles.autopilot.types import AUTOPILOT_COMPONENT, Guided, Mode, Stamp
 from vehicles.dynamics import FleetDynamics
 from vehicles.fleet_speed import LeaderRequest, LeaderSchedule, MissionClock, SpeedBook
-from vehicles.frames import GeodeticOrigin
 from vehicles.telemetry import BUILDERS, FleetSnapshot, TelemetrySchedule
 
 log = logging.getLogger(__name__)
@@ -93,7 +93,7 @@ class Autopilot:
         count: int,
         config: AutopilotConfig,
         dynamics: FleetDynamics,
-        origin: GeodeticOrigin,
+        origin: Origin,
         leader_requests: tuple[LeaderRequest, ...] = (),
     ) -> None:
         self.sysid = sysid

@@ -73,8 +73,8 @@ def global_point(ap: Autopilot, frame: int, lat: float, lon: float, alt: float) 
     if not finite(lat, lon, alt) or abs(lat) > 90.0 or abs(lon) > 180.0:
         return "Guided: setpoint latitude/longitude/altitude invalid"
     relative = frame in _RELATIVE_FRAMES
-    amsl = alt + (ap.origin.altitude_m + ap.home_enu[2] if relative else 0.0)
-    if abs(amsl - ap.origin.altitude_m) > 100_000.0:
+    amsl = alt + (ap.origin.alt + ap.home_enu[2] if relative else 0.0)
+    if abs(amsl - ap.origin.alt) > 100_000.0:
         return "Guided: setpoint altitude out of range"
     point = ap.origin.to_local(lat, lon, amsl)
     return check_point(ap, point)

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fleetline.errors import EXIT_BAD_INPUT, FleetlineError
+
 #: A mission file (YAML): the largest real ones are a few hundred kB.
 MISSION_BYTES = 16 * 2**20
 #: A footprint file (GeoJSON): city extracts run to tens of MB.
@@ -37,8 +39,10 @@ _OPEN = np.frombuffer(b"[{", dtype=np.uint8)
 _CLOSE = np.frombuffer(b"]}", dtype=np.uint8)
 
 
-class FileRefused(ValueError):
+class FileRefused(FleetlineError, ValueError):
     """The file is not what may be read; the message says what was expected and what it is."""
+
+    exit_status = EXIT_BAD_INPUT
 
 
 def _kind(mode: int) -> str:

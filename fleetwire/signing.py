@@ -32,6 +32,8 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetline.errors import EXIT_BAD_INPUT, FleetlineError
+
 #: MAVLink 2 signing timestamps count 10 us from 2015-01-01.
 SIGNING_EPOCH = 1420070400
 #: Link id of the fleet's signed streams (the ground station's and each vehicle's).
@@ -60,9 +62,11 @@ def check_key(key: bytes) -> None:
         raise ValueError("a MAVLink 2 signing key is 32 bytes")
 
 
-class KeyFileError(ValueError):
+class KeyFileError(FleetlineError, ValueError):
     """A key file that cannot be used: `expected` says what was expected (naming the file),
     `kind` which rule failed ("unreadable", "not_regular", "not_owner_only", "passphrase")."""
+
+    exit_status = EXIT_BAD_INPUT
 
     def __init__(self, path: Path, kind: str, expected: str) -> None:
         self.path = path

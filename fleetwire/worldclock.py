@@ -37,6 +37,8 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 
+from fleetline.errors import EXIT_BAD_INPUT, FleetlineError
+
 MAGIC = b"FLWCLK01"
 _HEADER = struct.Struct("<8sQdddI4x")
 _SEQ_OFFSET = 8
@@ -50,8 +52,10 @@ WORLD_LEAD_S = 0.3
 WORLD_LAG_S = 0.3
 
 
-class WorldClockError(ValueError):
+class WorldClockError(FleetlineError, ValueError):
     """The file is not a world clock (or not the one expected)."""
+
+    exit_status = EXIT_BAD_INPUT
 
 
 @dataclass(frozen=True)

@@ -8,16 +8,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
-#: Exit status for bad input (docs/cli.md).
-EXIT_BAD_INPUT = 2
+from fleetline.errors import EXIT_BAD_INPUT, FleetlineError
+
+__all__ = ["EXIT_BAD_INPUT", "InputError", "RowsRefused", "join_key"]
 
 
-class InputError(Exception):
+class InputError(FleetlineError):
     """A refused input: `FILE: KEY.PATH: expected ...` on one line.
 
     `file` may be None (a command-line flag), `key_path` may be empty (the whole file).
     Key paths use 0-based indexes, e.g. `obstacles[3].rectangle.size`.
     """
+
+    exit_status = EXIT_BAD_INPUT
 
     def __init__(self, file: str | Path | None, key_path: str, expected: str) -> None:
         self.file = None if file is None else str(file)

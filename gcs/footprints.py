@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 import shapely
 
+from fleetline.errors import EXIT_BAD_INPUT, FleetlineError
 from fleetwire.files import FOOTPRINT_BYTES, FileRefused, read_text_bounded
 from gcs.geodesy import Origin, lonlat_to_local
 from planner.formation import DISTANCE_TOLERANCE
@@ -86,9 +87,11 @@ _OSM_BARRIERS = ("wall", "fence")
 _HEIGHT = re.compile(r"\s*([0-9]+(?:[.,][0-9]*)?|[.,][0-9]+)\s*(?:m|metres|meters)?\s*\Z", re.I)
 
 
-class FootprintError(Exception):
+class FootprintError(FleetlineError):
     """A refused footprint file: what is expected, and the item's sub-key it concerns
     (`""` for the item itself, else e.g. `crs`, `bbox`)."""
+
+    exit_status = EXIT_BAD_INPUT
 
     def __init__(self, expected: str, key: str = "") -> None:
         super().__init__(expected)

@@ -39,6 +39,7 @@ import socket
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fleetline.errors import FleetlineError
 from gcs.flight.answers import OperatorAnswer
 
 log = logging.getLogger(__name__)
@@ -96,7 +97,7 @@ class ScheduledChange:
     leader: int | None = None
 
 
-class SpeedRefused(ValueError):
+class SpeedRefused(FleetlineError, ValueError):
     """A speed request that cannot be honoured (the reason is the message)."""
 
 
@@ -328,7 +329,7 @@ def send_operator_request(path: Path, speed: float, at: float | None, timeout_s:
     return send_operator_command(path, request, timeout_s)
 
 
-class NoMissionAnswered(Exception):
+class NoMissionAnswered(FleetlineError):
     """No running mission answered a request (the message says where it looked)."""
 
 

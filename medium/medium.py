@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetline.errors import EXIT_BAD_INPUT, FleetlineError
 from fleetwire.frames import frames
 from fleetwire.geodesy import Origin
 from fleetwire.worldclock import FollowerClock, WorldClockFollower
@@ -58,8 +59,10 @@ _SIM_STATE_FIELDS = {name: i for i, name in enumerate(_SIM_STATE.ordered_fieldna
 _TOPOLOGY_MAX_AGE_S = 0.01  # simulated seconds a computed topology is reused for
 
 
-class MediumPortInUse(OSError):
+class MediumPortInUse(FleetlineError, OSError):
     """A port the medium must listen on is taken."""
+
+    exit_status = EXIT_BAD_INPUT
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from fleetline.errors import FleetlineError
 from planner.formation import DISTANCE_TOLERANCE, collision_spacing, radio_spacing
 from planner.guarantees import _chunk_metrics
 from planner.kinematics import LineFormation
@@ -47,7 +48,7 @@ _PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
 CHECK_STEP_S = 0.2
 
 
-class ReliefRefused(ValueError):
+class ReliefRefused(FleetlineError, ValueError):
     """The chain cannot let this UAV go: the message says why."""
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fleetline.errors import FleetlineError
 from planner.formation import DISTANCE_TOLERANCE, collision_spacing, radio_spacing
 from planner.numbers import digits_against, fmt_against, plural
 
@@ -147,7 +148,7 @@ def _two_opt(dist: np.ndarray, route: np.ndarray) -> np.ndarray:
         )
 
 
-class StationError(ValueError):
+class StationError(FleetlineError, ValueError):
     """No stations fit the gap before point `point` (0-based, in visiting order)."""
 
     def __init__(self, point: int, message: str) -> None:

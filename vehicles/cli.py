@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+from fleetline.errors import UsageError
 from fleetwire.geodesy import Origin
 from fleetwire.messages import GCS_SYSTEM_ID
 from fleetwire.worldclock import WorldClockError, check_world_clock
@@ -34,13 +35,9 @@ PROG = "vehicles"
 DEFAULT_SPACING_M = 5.0
 
 
-class InputError(Exception):
-    """A bad flag value: the message names the flag and what is expected."""
-
-
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (argparse prints usage too)
-        raise InputError(message)
+        raise UsageError(message)
 
 
 def _positive(flag: str, allow_zero: bool = False):
@@ -48,10 +45,10 @@ def _positive(flag: str, allow_zero: bool = False):
         try:
             value = float(text)
         except ValueError:
-            raise InputError(f"{flag}: expected a number, got {text!r}") from None
+            raise UsageError(f"{flag}: expected a number, got {text!r}") from None
         if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
             expected = ">= 0" if allow_zero else "> 0"
-            raise InputError(f"{flag}: expected a finite number {expected}, got {text!r}")
+            raise UsageError(f"{flag}: expected a finite number {expected}, got {text!r}")
         return value
 
     return parse
@@ -62,9 +59,9 @@ def _integer(flag: str, low: int, high: int):
         try:
             value = int(text)
         except ValueError:
-            raise InputError(f"{flag}: expected an integer, got {text!r}") from None
+            raise UsageError(f"{flag}: expected an integer, got {text!r}") from None
         if not low <= value <= high:
-            raise InputError(f"{flag}: expected an integer in [{low}, {high}], got {value}")
+            raise UsageError(f"{flag}: expected an integer in [{low}, {high}], got {value}")
         return value
 
     return parse
@@ -74,11 +71,11 @@ def _floats(flag: str, text: str, sizes: tuple[int, ...]) -> list[float]:
     try:
         values = [float(part) for part in text.split(",")]
     except ValueError:
-        raise InputError(
+        raise UsageError(
             f"{flag}: expected {' or '.join(map(str, sizes))} comma-separated numbers, got {text!r}"
         ) from None
     if len(values) not in sizes or not all(math.isfinite(v) for v in values):
-        raise InputError(
+        raise UsageError(
             f"{flag}: expected {' or '.join(map(str, sizes))} comma-separated finite numbers, got {text!r}"
         )
     return values
@@ -87,7 +84,7 @@ def _floats(flag: str, text: str, sizes: tuple[int, ...]) -> list[float]:
 def _home(text: str) -> Origin:
     lat, lon, alt = _floats("--home", text, (3,))
     if abs(lat) > 90 or abs(lon) > 180:
-        raise InputError(
+        raise UsageError(
             f"--home: expected LAT,LON,ALT with |LAT| <= 90 and |LON| <= 180, got {text!r}"
         )
     return Origin(lat, lon, alt)
@@ -102,7 +99,7 @@ def _out(text: str) -> tuple[str, int]:
     address = text.removeprefix("udpout:")
     host, _, port = address.rpartition(":")
     if not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise InputError(
+        raise UsageError(
             f"--out: expected udpout:HOST:PORT (e.g. udpout:127.0.0.1:14550), got {text!r}"
         )
     return host, int(port)
@@ -115,16 +112,16 @@ def _leader_requests(text: str) -> tuple[LeaderRequest, ...]:
         try:
             request = LeaderRequest(float(when), float(speed))
         except ValueError:
-            raise InputError(
+            raise UsageError(
                 f"--leader-requests: expected T:V,... (mission time s : speed m/s), got {item!r}"
             ) from None
         if not (math.isfinite(request.mission_time_s) and math.isfinite(request.speed_mps)):
-            raise InputError(f"--leader-requests: expected finite numbers, got {item!r}")
+            raise UsageError(f"--leader-requests: expected finite numbers, got {item!r}")
         if request.mission_time_s < 0 or request.speed_mps < 0:
-            raise InputError(f"--leader-requests: expected T >= 0 and V >= 0, got {item!r}")
+            raise UsageError(f"--leader-requests: expected T >= 0 and V >= 0, got {item!r}")
         requests.append(request)
     if not requests:
-        raise InputError(
+        raise UsageError(
             f"--leader-requests: expected T:V,... (mission time s : speed m/s), got {text!r}"
         )
     return tuple(requests)
@@ -142,7 +139,7 @@ def _position_list(source: str, items: list) -> list[tuple[float, float, float]]
                 for v in values
             )
         ):
-            raise InputError(
+            raise UsageError(
                 f"{source}[{k}]: expected [x, y] or [x, y, z] in metres (local ENU), got {item!r}"
             )
         positions.append(
@@ -157,7 +154,7 @@ def _positions(text: str) -> list[tuple[float, float, float]]:
         try:
             items.append([float(v) for v in part.split(",")])
         except ValueError:
-            raise InputError(
+            raise UsageError(
                 f"--positions[{k}]: expected x,y or x,y,z in metres, got {part!r}"
             ) from None
     return _position_list("--positions", items)
@@ -167,11 +164,11 @@ def _positions_file(path: str) -> list[tuple[float, float, float]]:
     try:
         data = json.loads(Path(path).read_text())
     except (OSError, ValueError) as exc:
-        raise InputError(
+        raise UsageError(
             f"{path}: expected a readable JSON file ({exc.__class__.__name__})"
         ) from None
     if not isinstance(data, list):
-        raise InputError(f"{path}: expected a JSON list of [x, y] or [x, y, z] positions")
+        raise UsageError(f"{path}: expected a JSON list of [x, y] or [x, y, z] positions")
     return _position_list(path, data)
 
 
@@ -182,7 +179,7 @@ def _battery_mah(text: str) -> tuple[float, ...]:
     except ValueError:
         values = ()
     if not values or not all(math.isfinite(v) and v > 0 for v in values):
-        raise InputError(
+        raise UsageError(
             f"--battery-mah: expected a number > 0 or comma-separated numbers > 0 (mAh, one "
             f"per vehicle), got {text!r}"
         )
@@ -193,14 +190,14 @@ def _signing_key(path: str) -> bytes:
     try:
         return read_key_file(path)
     except KeyFileError as exc:
-        raise InputError(f"--signing-key-file: {exc}") from None
+        raise UsageError(f"--signing-key-file: {exc}") from None
 
 
 def _world_clock(path: str) -> Path:
     try:
         return check_world_clock(path)
     except WorldClockError as exc:
-        raise InputError(f"--world-clock: {exc}") from None
+        raise UsageError(f"--world-clock: {exc}") from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -421,31 +418,31 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
     if positions is None:
         positions = [(k * DEFAULT_SPACING_M, 0.0, 0.0) for k in range(count)]
     elif len(positions) != count:
-        raise InputError(
+        raise UsageError(
             f"--positions: expected {count} positions (one per vehicle), got {len(positions)}"
         )
     if args.base_port + count - 1 > 65535:
-        raise InputError(
+        raise UsageError(
             f"--base-port: base-port + count - 1 must be <= 65535, got {args.base_port + count - 1}"
         )
     if args.sysid_base + count - 1 > 254:
-        raise InputError(
+        raise UsageError(
             f"--sysid-base: sysid-base + count - 1 must be <= 254, got {args.sysid_base + count - 1}"
         )
     sysids = range(args.sysid_base, args.sysid_base + count)
     leader = args.leader_sysid if args.leader_sysid is not None else args.sysid_base
     if args.leader_requests and leader not in sysids:
-        raise InputError(
+        raise UsageError(
             f"--leader-sysid: expected one of this process's system ids {sysids[0]}..{sysids[-1]}, got {leader}"
         )
     if args.gcs_sysid in sysids:
-        raise InputError(
+        raise UsageError(
             f"--gcs-sysid: must differ from the vehicles' system ids, got {args.gcs_sysid}"
         )
     batteries: tuple[float | None, ...] = (None,) * count
     if args.battery_mah is not None:
         if len(args.battery_mah) not in (1, count):
-            raise InputError(
+            raise UsageError(
                 f"--battery-mah: expected 1 or {count} numbers (one per vehicle), "
                 f"got {len(args.battery_mah)}"
             )
@@ -517,7 +514,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         config = config_from_args(args)
-    except InputError as exc:
+    except UsageError as exc:
         print(f"{PROG} sim: error: {exc}", file=sys.stderr)
         return 2
     logging.basicConfig(

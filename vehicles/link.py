@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetline.errors import EXIT_BAD_INPUT, FleetlineError
 from vehicles.autopilot import AUTOPILOT_COMPONENT
 from vehicles.signing import VehicleSigning
 
@@ -39,8 +40,10 @@ SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35 if sys.platform == "linux"
 _ANCILLARY_BYTES = socket.CMSG_SPACE(16) if hasattr(socket, "CMSG_SPACE") else 0
 
 
-class PortInUseError(OSError):
+class PortInUseError(FleetlineError, OSError):
     """The UDP port a vehicle must listen on is taken."""
+
+    exit_status = EXIT_BAD_INPUT
 
     def __init__(self, host: str, port: int, sysid: int) -> None:
         super().__init__(errno.EADDRINUSE, f"UDP {host}:{port} (sysid {sysid}) is already in use")

@@ -10,7 +10,8 @@ them (tests/test_startup.py checks `gcs mission plan` imports none of them).
 
 Exit statuses (docs/cli.md): 0 success, 1 the command ran and failed (no valid path, mission
 aborted...), 2 bad input. Bad input (`InputError`, argparse usage errors) is one line on
-stderr, never a traceback.
+stderr, never a traceback; so is every other `fleetline.errors.FleetlineError` that ends a
+command, with its own exit status.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import logging
 import os
 import sys
 
-from gcs.errors import EXIT_BAD_INPUT, InputError
+from fleetline.errors import FleetlineError, UsageError
 
 #: Command-group modules, each with `register(subparsers)`. Add a group here.
 GROUPS: tuple[str, ...] = (
@@ -33,10 +34,6 @@ GROUPS: tuple[str, ...] = (
     "gcs.cli.cmd_sitl",
     "gcs.cli.cmd_eval",
 )
-
-
-class UsageError(Exception):
-    """An argparse usage error, reported on one line with exit status 2."""
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -98,12 +95,9 @@ def main(argv: list[str] | None = None) -> int:
         status = int(args.handler(args))
         deferred.print_held()
         return status
-    except InputError as exc:
+    except FleetlineError as exc:  # bad input (2) or a refusal (1): one line, no traceback
         print(exc, file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except UsageError as exc:
-        print(exc, file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return exc.exit_status
     except KeyboardInterrupt:
         print("gcs: interrupted", file=sys.stderr)
         return 130

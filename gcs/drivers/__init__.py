@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 
+from fleetline.errors import EXIT_BAD_INPUT, FleetlineError
 from gcs.drivers.base import Driver
 
 #: backend name -> "module:DriverClass"
@@ -19,8 +20,10 @@ FAMILIES: dict[str, str] = {
 }
 
 
-class BackendUnavailable(LookupError):
+class BackendUnavailable(FleetlineError, LookupError):
     """The backend is known but its driver is not installed (or not written yet)."""
+
+    exit_status = EXIT_BAD_INPUT
 
 
 def driver_class(backend: str) -> type[Driver]:

@@ -60,6 +60,7 @@ from typing import Protocol
 
 import numpy as np
 
+from fleetline.errors import FleetlineError
 from fleetwire.messages import parse_clock_slipped
 from gcs.drivers.base import Driver, DriverEvent, Phase
 from gcs.drivers.limits import LimitExceeded, exceeded
@@ -247,7 +248,7 @@ class StationsResult:
     relieved: tuple[UavRelieved, ...] = ()
 
 
-class ReturnRefused(ValueError):
+class ReturnRefused(FleetlineError, ValueError):
     """A return home that cannot be flown (the reason is the message)."""
 
 

@@ -56,6 +56,7 @@ import yaml
 from foxglove.channels import FrameTransformsChannel, GeoJsonChannel, LocationFixChannel, LogChannel
 from foxglove.messages import GeoJson, LocationFix, Log, LogLevel, SceneUpdate, Timestamp
 
+from fleetline.errors import FleetlineError
 from gcs.flight.records import (
     MetricsRecord,
     RadioRecord,
@@ -80,7 +81,7 @@ FLUSH_PERIOD_S = 1.0
 GEOJSON_PERIOD_S = 5.0
 
 
-class LiveServerError(Exception):
+class LiveServerError(FleetlineError):
     """The live Foxglove server could not start (its port is taken)."""
 
 

@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from fleetline.errors import FleetlineError
 from gcs.errors import InputError
 from gcs.link import GCS_SYSTEM_ID, open_connection
 from gcs.logs.logreader import Recording
@@ -35,7 +36,7 @@ class RecordedFrame:
     raw: bytes
 
 
-class ReplayError(Exception):
+class ReplayError(FleetlineError):
     """Sending failed (an unresolvable host, a closed TCP peer...) after `sent` frames."""
 
     def __init__(self, sent: int, error: Exception) -> None:

@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from fleetline.errors import EXIT_BAD_INPUT, FleetlineError
 from gcs.netsim.scenario import SAMPLE_HZ, NetScenario, station_table
 
 PROPAGATIONS = ("range", "logdistance")
@@ -74,8 +75,10 @@ ARP_DEAD_S = 1.0
 MISSING_EXTRA = "the ns3 extra is not installed: pip install 'fleetline[ns3]'"
 
 
-class NetsimUnavailable(RuntimeError):
+class NetsimUnavailable(FleetlineError, RuntimeError):
     """ns-3's Python bindings cannot be imported."""
+
+    exit_status = EXIT_BAD_INPUT
 
     def __init__(self, message: str = MISSING_EXTRA) -> None:
         super().__init__(message)

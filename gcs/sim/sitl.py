@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fleetline.errors import FleetlineError
 from gcs.errors import InputError
 from gcs.geodesy import enu_to_geodetic
 from gcs.mission import Mission
@@ -48,7 +49,7 @@ PX4_AIRFRAME = 10040
 PX4_MODEL = "sihsim_quadx"
 
 
-class NoValidPath(Exception):
+class NoValidPath(FleetlineError):
     """The mission has no valid path: there is no fleet to launch."""
 
 

@@ -32,13 +32,14 @@ import numpy as np
 import shapely
 import yaml
 
+from fleetline.errors import FleetlineError
 from gcs.mission import Mission, parse_mission, parse_yaml
 from gcs.study.studyfile import MapGenerator, RunSpec, Study
 
 log = logging.getLogger(__name__)
 
 
-class NoPath(RuntimeError):
+class NoPath(FleetlineError, RuntimeError):
     """The planner found no valid path for the run's mission."""
 
 

@@ -24,6 +24,7 @@ import socket
 import sys
 from collections.abc import Sequence
 
+from fleetline.errors import UsageError
 from fleetwire.files import FOOTPRINT_BYTES, FileRefused, read_text_bounded
 from fleetwire.worldclock import WorldClockError
 from medium.calibration import DEFAULT_CALIBRATION, CalibrationTable, load_calibration
@@ -31,7 +32,7 @@ from medium.ground_users import DEFAULT_PACKET_BYTES, DEFAULT_RATE_BPS, GroundUs
 from medium.medium import Medium, MediumConfig, MediumPortInUse, MediumUav
 from medium.pathloss import ThroughBuildings
 from medium.radio import MODELS, RadioConfig
-from vehicles.cli import InputError, _home, _integer, _Parser, _positive, _world_clock
+from vehicles.cli import _home, _integer, _Parser, _positive, _world_clock
 from vehicles.sim import DEFAULT_ORIGIN
 
 PROG = "medium.cli"
@@ -41,9 +42,9 @@ def _ports(text: str) -> list[int]:
     try:
         ports = [int(part) for part in text.split(",")]
     except ValueError:
-        raise InputError(f"--vehicle-ports: expected comma-separated ports, got {text!r}") from None
+        raise UsageError(f"--vehicle-ports: expected comma-separated ports, got {text!r}") from None
     if not all(0 < p < 65536 for p in ports):
-        raise InputError(f"--vehicle-ports: expected ports in 1..65535, got {text!r}")
+        raise UsageError(f"--vehicle-ports: expected ports in 1..65535, got {text!r}")
     return ports
 
 
@@ -59,9 +60,9 @@ def _xy(flag: str, text: str) -> list[tuple[float, float]]:
         try:
             x, y = (float(v) for v in part.split(","))
         except ValueError:
-            raise InputError(f"{flag}: expected 'x,y;x,y;...' in metres, got {part!r}") from None
+            raise UsageError(f"{flag}: expected 'x,y;x,y;...' in metres, got {part!r}") from None
         if not (math.isfinite(x) and math.isfinite(y)):
-            raise InputError(f"{flag}: expected finite coordinates, got {part!r}")
+            raise UsageError(f"{flag}: expected finite coordinates, got {part!r}")
         points.append((x, y))
     return points
 
@@ -74,10 +75,10 @@ def _ground_users(text: str) -> list[GroundUser]:
         except ValueError:
             values = []
         if len(values) not in (2, 3) or not all(math.isfinite(v) for v in values):
-            raise InputError(f"--ground-users: expected 'x,y[,rate_bps];...', got {part!r}")
+            raise UsageError(f"--ground-users: expected 'x,y[,rate_bps];...', got {part!r}")
         rate = values[2] if len(values) == 3 else DEFAULT_RATE_BPS
         if rate <= 0:
-            raise InputError(f"--ground-users: expected a rate > 0 bit/s, got {part!r}")
+            raise UsageError(f"--ground-users: expected a rate > 0 bit/s, got {part!r}")
         users.append(GroundUser(values[0], values[1], rate))
     return users
 
@@ -93,7 +94,7 @@ def _buildings(path: str | None, nlos_range_m: float = 0.0):
         sight = sight_from_json(json.loads(read_text_bounded(path, FOOTPRINT_BYTES)))
         return ThroughBuildings(sight, nlos_range_m)
     except (OSError, UnicodeDecodeError, FileRefused, ValueError) as exc:
-        raise InputError(
+        raise UsageError(
             f"--buildings: expected a buildings file of the ground station: {path}: {exc}"
         ) from None
 
@@ -102,18 +103,18 @@ def _calibration(model: str, path: str | None) -> CalibrationTable | None:
     """The table of `--model calibrated` (`--calibration`, default the shipped one)."""
     if model != "calibrated":
         if path is not None:
-            raise InputError("--calibration: expected --model calibrated with it")
+            raise UsageError("--calibration: expected --model calibrated with it")
         return None
     try:
         return load_calibration(path if path is not None else DEFAULT_CALIBRATION)
     except ValueError as exc:
-        raise InputError(f"--calibration: expected a table of gcs eval calibrate ({exc})") from None
+        raise UsageError(f"--calibration: expected a table of gcs eval calibrate ({exc})") from None
 
 
 def _report_address(text: str) -> tuple[str, int]:
     host, _, port = text.removeprefix("udp:").rpartition(":")
     if not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise InputError(f"--report: expected udp:HOST:PORT, got {text!r}")
+        raise UsageError(f"--report: expected udp:HOST:PORT, got {text!r}")
     return host, int(port)
 
 
@@ -158,19 +159,19 @@ def build_parser() -> argparse.ArgumentParser:
 def config_from_args(args: argparse.Namespace) -> MediumConfig:
     count = args.count
     if len(args.vehicle_ports) != count:
-        raise InputError(f"--vehicle-ports: expected {count} ports, got {len(args.vehicle_ports)}")
+        raise UsageError(f"--vehicle-ports: expected {count} ports, got {len(args.vehicle_ports)}")
     positions = _xy("--positions", args.positions)
     if len(positions) != count:
-        raise InputError(f"--positions: expected {count} positions, got {len(positions)}")
+        raise UsageError(f"--positions: expected {count} positions, got {len(positions)}")
     stations = _xy("--stations", args.stations)
     if not stations:
-        raise InputError("--stations: expected at least one base station 'x,y'")
+        raise UsageError("--stations: expected at least one base station 'x,y'")
     if not args.loss < 1:
-        raise InputError(f"--loss: expected a probability in [0, 1), got {args.loss:g}")
+        raise UsageError(f"--loss: expected a probability in [0, 1), got {args.loss:g}")
     if args.base_port + count - 1 > 65535:
-        raise InputError("--base-port: base-port + count - 1 must be <= 65535")
+        raise UsageError("--base-port: base-port + count - 1 must be <= 65535")
     if args.sysid_base + count - 1 > 254:
-        raise InputError("--sysid-base: sysid-base + count - 1 must be <= 254")
+        raise UsageError("--sysid-base: sysid-base + count - 1 must be <= 254")
     uavs = tuple(
         MediumUav(args.sysid_base + k, args.vehicle_ports[k], args.base_port + k, positions[k])
         for k in range(count)
@@ -203,7 +204,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         config = config_from_args(args)
-    except InputError as exc:
+    except UsageError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     logging.basicConfig(

@@ -26,6 +26,7 @@ from mcap.stream_reader import StreamReader
 
 import gcs.cli
 import vehicles.cli
+from fleetline.errors import UsageError
 from gcs.flight.clock import MissionClock
 from gcs.flight.records import MetricsRecord
 from gcs.link import Link
@@ -188,7 +189,7 @@ def test_every_vehicles_flag_is_refused_on_one_line(capsys):
     ]
     for args, flag in cases:
         argv = ["sim", "--base-port", "14560", *args]
-        with pytest.raises(vehicles.cli.InputError):  # refused while parsing: nothing starts
+        with pytest.raises(UsageError):  # refused while parsing: nothing starts
             vehicles.cli.config_from_args(vehicles.cli.build_parser().parse_args(argv))
         capsys.readouterr()
         code = vehicles.cli.main(argv)

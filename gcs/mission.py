@@ -160,8 +160,9 @@ class Station:
 
 
 @dataclass(frozen=True)
-class SpeedChange:
-    """A scheduled speed change: effective time `at` (s), new speed (m/s), optional leader.
+class ScheduledChange:
+    """A speed change of the mission file's schedule: effective time `at` (s), new speed (m/s),
+    optional leader.
 
     With a `leader` (1-based UAV number) `at` is when that UAV sends the request.
     """
@@ -177,7 +178,7 @@ class SpeedSchedule:
 
     max: float
     initial: float
-    changes: tuple[SpeedChange, ...] = ()
+    changes: tuple[ScheduledChange, ...] = ()
     cap_to_safe: bool = False
 
 
@@ -902,7 +903,7 @@ class MissionParser:
             leader = None
             if "leader" in c:
                 leader = self.integer(c["leader"], join_key(path, "leader"), low=1)
-            changes.append(SpeedChange(at=at, speed=speed, leader=leader))
+            changes.append(ScheduledChange(at=at, speed=speed, leader=leader))
         last_path = f"speed.changes[{len(changes) - 1}].speed" if changes else "speed.initial"
         last = changes[-1].speed if changes else initial
         if last <= 0:

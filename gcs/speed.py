@@ -41,6 +41,7 @@ from pathlib import Path
 
 from fleetline.errors import FleetlineError
 from gcs.flight.answers import OperatorAnswer
+from gcs.mission import ScheduledChange
 
 log = logging.getLogger(__name__)
 
@@ -86,15 +87,6 @@ class SpeedBroadcast:
             "acks": {str(uav): delay for uav, delay in sorted(self.acks.items())},
             **({"refused": {str(u): r for u, r in self.refused.items()}} if self.refused else {}),
         }
-
-
-@dataclass(frozen=True)
-class ScheduledChange:
-    """A change of the mission file: effective at `at`, or sent by `leader` at `at`."""
-
-    at: float
-    speed: float
-    leader: int | None = None
 
 
 class SpeedRefused(FleetlineError, ValueError):

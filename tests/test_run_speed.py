@@ -16,9 +16,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gcs.flight.answers import AnswerResult, OperatorAnswer, OperatorCommand
+from gcs.mission import ScheduledChange
 from gcs.speed import (
     OperatorSocket,
-    ScheduledChange,
     SpeedChanges,
     SpeedRefused,
     find_running_sockets,

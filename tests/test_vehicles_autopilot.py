@@ -16,7 +16,13 @@ from tests.autopilot_bench import GCS, Bench
 from vehicles.autopilot import Autopilot, AutopilotConfig, FailsafeConfig, Guided, Mode, Stamp
 from vehicles.autopilot.parameters import parameters
 from vehicles.dynamics import DynamicsConfig, FleetDynamics
-from vehicles.fleet_speed import LeaderRequest, LeaderSchedule, MissionClock, SpeedBook, SpeedChange
+from vehicles.fleet_speed import (
+    HeardSpeedChange,
+    LeaderRequest,
+    LeaderSchedule,
+    MissionClock,
+    SpeedBook,
+)
 from vehicles.link import make_codec
 from vehicles.sim import DEFAULT_ORIGIN
 from vehicles.telemetry import BUILDERS, FleetSnapshot, TelemetryRates, TelemetrySchedule
@@ -272,14 +278,14 @@ def test_telemetry_schedule_rates_and_overrides():
 def test_speed_book_drops_duplicates_and_applies_timed_changes_at_their_time():
     clock = MissionClock()
     book = SpeedBook()
-    assert book.record(SpeedChange(255, 1, None, 10.0, received_sim_s=1.0))
-    assert not book.record(SpeedChange(255, 1, None, 3.0, received_sim_s=2.0))
+    assert book.record(HeardSpeedChange(255, 1, None, 10.0, received_sim_s=1.0))
+    assert not book.record(HeardSpeedChange(255, 1, None, 3.0, received_sim_s=2.0))
     assert book.record(
-        SpeedChange(4, 1, None, 7.0, received_sim_s=2.5)
+        HeardSpeedChange(4, 1, None, 7.0, received_sim_s=2.5)
     )  # another sender's sequence
     assert book.fleet_speed(3.0, clock) == 7.0
     clock.sync(mission_time_s=100.0, sim_time_s=10.0)
-    assert book.record(SpeedChange(255, 2, 105.0, 5.0, received_sim_s=11.0))
+    assert book.record(HeardSpeedChange(255, 2, 105.0, 5.0, received_sim_s=11.0))
     assert book.fleet_speed(14.9, clock) == 7.0
     assert book.fleet_speed(15.0, clock) == 5.0
     assert clock.now(20.0) == pytest.approx(110.0)

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 
 @dataclass(frozen=True)
-class SpeedChange:
+class HeardSpeedChange:
     """A fleet speed change as heard by a vehicle."""
 
     source_system: int
@@ -65,10 +65,10 @@ class SpeedBook:
     """Speed changes recorded by one vehicle, duplicates (same sender and sequence) dropped."""
 
     def __init__(self) -> None:
-        self.changes: list[SpeedChange] = []
+        self.changes: list[HeardSpeedChange] = []
         self._seen: set[tuple[int, int]] = set()
 
-    def record(self, change: SpeedChange) -> bool:
+    def record(self, change: HeardSpeedChange) -> bool:
         """Record ``change``; False if it duplicates one already recorded."""
         if change.sequence != 0:
             key = (change.source_system, change.sequence)
@@ -84,7 +84,7 @@ class SpeedBook:
         An immediate change takes effect when received; a timed one when the mission clock
         reaches its effective time (without a mission clock: when received).
         """
-        best: SpeedChange | None = None
+        best: HeardSpeedChange | None = None
         best_key = (float("-inf"), float("-inf"))
         for change in self.changes:
             start = change.received_sim_s

@@ -84,7 +84,6 @@ from gcs.geodesy import enu_to_geodetic
 from gcs.link import mavutil
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
 from gcs.speed import (
-    ScheduledChange,
     SpeedBroadcast,
     SpeedChange,
     SpeedChanges,
@@ -492,7 +491,7 @@ class GroundStation:
         # The profile starts with the initial speed; every change (scheduled ones included) is
         # added when it is broadcast, always ahead of its effective time.
         self.profile = SpeedProfile.constant(plan.speeds.initial)
-        schedule = [ScheduledChange(c.at, c.speed, c.leader) for c in plan.speeds.changes]
+        schedule = list(plan.speeds.changes)
         self.speeds = SpeedChanges(
             max_speed=plan.speeds.max, window_s=self.window_s, schedule=schedule
         )

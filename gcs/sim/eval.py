@@ -32,7 +32,7 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from gcs.mission import Mission, SpeedChange, SpeedSchedule, load_mission  # noqa: E402
+from gcs.mission import Mission, ScheduledChange, SpeedSchedule, load_mission  # noqa: E402
 from gcs.planning import plan_mission  # noqa: E402
 from gcs.sim.fastsim import FastOptions, FastRun, fly_fast  # noqa: E402
 from medium.radio_stats import KINDS  # noqa: E402
@@ -86,7 +86,7 @@ def fixed_speed(mission: Mission, speed: float) -> Mission:
 def led(mission: Mission, leader: int, speed: float, requests) -> Mission:
     """`mission` at `speed` with UAV `leader` asking for each (time, speed) of `requests`."""
     top = max([speed, *(v for _, v in requests)])
-    changes = tuple(SpeedChange(at, v, leader) for at, v in requests)
+    changes = tuple(ScheduledChange(at, v, leader) for at, v in requests)
     return replace(mission, speed=SpeedSchedule(max=top, initial=speed, changes=changes))
 
 

@@ -21,7 +21,7 @@ from fleetwire.messages import (
 )
 from vehicles.autopilot.setpoints import finite
 from vehicles.autopilot.types import Stamp
-from vehicles.fleet_speed import SpeedChange
+from vehicles.fleet_speed import HeardSpeedChange
 
 if TYPE_CHECKING:
     from vehicles.autopilot.commands import Command
@@ -45,7 +45,7 @@ def change_speed(ap: Autopilot, cmd: Command, stamp: Stamp) -> int:
         return mavlink.MAV_RESULT_ACCEPTED  # -1 / -2: no change / default
     sequence = command.sequence
     effective = command.effective_s
-    change = SpeedChange(cmd.source_system, sequence, effective, float(speed), stamp.sim_s)
+    change = HeardSpeedChange(cmd.source_system, sequence, effective, float(speed), stamp.sim_s)
     if ap.speeds.record(change):
         log.info(
             "sysid %d: speed change seq %d: %.2f m/s at %s",

@@ -18,7 +18,7 @@ import time
 
 import pytest
 
-from gcs.flight.core import REJOIN_SETTLE_S
+from gcs.flight.rejoin import REJOIN_SETTLE_S
 from tests.flying import Flight, children_running, flight_speedup, mission_file
 
 pytestmark = [

@@ -78,6 +78,7 @@ from gcs.flight.records import (
     UavStateRecord,
     run_json_radio,
 )
+from gcs.flight.rejoin import RejoinPolicy
 from gcs.flight.roster import Roster
 from gcs.flight.stall import Resume, resume_point
 from gcs.geodesy import enu_to_geodetic
@@ -126,12 +127,6 @@ STALL_WALL_FLOOR_S = 0.25
 STILL_BEFORE_LANDING_S = 0.5
 #: After the last landing, how long (wall s) the GCS waits for disarming and commands in flight.
 SETTLE_WALL_S = 3.0
-#: A UAV whose link came back rejoins the formation only after this long (mission s) in
-#: guided flight within its tracking allowance: two heartbeats, so a mode its autopilot took
-#: while cut off (BRAKE, its own failsafe) is known before the formation moves again. (With
-#: none, a formation resumed at the link's return, 0.8 s before that UAV's BRAKE was read,
-#: and left it 5.1 m behind.)
-REJOIN_SETTLE_S = 2.0
 #: Why an operator's speed change is refused while a stations mission's fleet holds.
 _HOLDING = (
     "every UAV holds its station: the formation stands still until the return (gcs return); "
@@ -430,10 +425,7 @@ class GroundStation:
         self.aborting = False
         self.frozen_by: str | None = None  # "link" | "operator" | "takeoff" | None
         self._resume_speed: float | None = None
-        self._link_deadline: float | None = None
-        self._rejoining: set[int] = set()  # UAVs lost, to be back on their targets
-        # mission time since which each rejoining UAV has flown guided within its allowance
-        self._rejoined_since: dict[int, float] = {}
+        self.rejoin = RejoinPolicy(options.link_wait_s, options.interactive)
         self.interrupts = 0
         self._handled_interrupts = 0
         self._samples: list[tuple[int, float, np.ndarray, bool]] = []  # uav, t, xyz, true?
@@ -1437,7 +1429,7 @@ class GroundStation:
         self._records.append(record)
         if change.source == "operator" and change.speed > 0 and self.frozen_by is not None:
             self.frozen_by = None  # the operator decided
-            self._link_deadline = None
+            self.rejoin.operator_decided()
 
     def _freeze(self, why: str, now: float) -> None:
         """Speed 0 at the earliest effective time (the formation holds its shape)."""
@@ -1867,66 +1859,46 @@ class GroundStation:
         return out
 
     def _link_policy(self, t: float, now: float) -> None:
-        """A UAV lost (link, or its own failsafe) freezes the formation. When its link is back,
-        a UAV that holds is taken back to guided flight, and the formation stays frozen until
-        every such UAV has rejoined its target (within `vehicle.tracking_allowance`, in guided
-        flight, for `REJOIN_SETTLE_S`), so that no UAV is asked to catch up a formation that
-        ran on. Without an operator, a UAV still
-        lost or not rejoined after `link_wait_s`, or one that lands by itself, lands everyone."""
+        """A UAV lost (link, or its own failsafe) freezes the formation; it resumes once every
+        such UAV has rejoined its target, else everyone lands (`gcs.flight.rejoin` decides,
+        this applies)."""
         if self.aborting:
             return
         unavailable = self._unavailable()
-        for index in unavailable:
-            driver = self.drivers[index]
-            if driver.phase == Phase.HOLDING and not self.links.lost[index]:
-                driver.resume(now)  # its link is back: guided flight again
-                self._event(
-                    MonitorEvent(
-                        t, "warning", "rejoin", f"UAV {index + 1}: back to guided flight, rejoining",
-                        index + 1,
-                    ),
-                    now,
-                )  # fmt: skip
-            self._rejoining.add(index)
-        if unavailable and self.frozen_by != "link":
+        decision = self.rejoin.decide(
+            t,
+            unavailable,
+            holding=frozenset(
+                i
+                for i in unavailable
+                if self.drivers[i].phase == Phase.HOLDING and not self.links.lost[i]
+            ),
+            landing=frozenset(i for i in unavailable if self.drivers[i].phase == Phase.LANDING),
+            tracking_now=self.tracking_now,
+            tolerance_m=self.mission.vehicle.tracking_allowance,
+            frozen_by=self.frozen_by,
+        )
+        for index in decision.guided:
+            self.drivers[index].resume(now)  # its link is back: guided flight again
+            self._event(
+                MonitorEvent(
+                    t, "warning", "rejoin", f"UAV {index + 1}: back to guided flight, rejoining",
+                    index + 1,
+                ),
+                now,
+            )  # fmt: skip
+        if decision.freeze:
             if self.frozen_by is None:
                 self._freeze("link", now)
             self.frozen_by = "link"
-            if self.options.interactive:
-                self.view.message(
-                    "error", "link lost: formation frozen. Type a speed to resume, or 'land'."
-                )
-            else:
-                self._link_deadline = t + self.options.link_wait_s
-        if self.frozen_by != "link" or self.options.interactive:
-            self._rejoining.clear()  # the operator decided
-            self._rejoined_since.clear()
-            return
-        landing = [i for i in unavailable if self.drivers[i].phase == Phase.LANDING]
-        if landing:
-            self.land_everyone(f"UAV {landing[0] + 1} {unavailable[landing[0]]}", now)
-            return
-        tolerance = self.mission.vehicle.tracking_allowance
-        for i in self._rejoining:
-            if i in unavailable or not self.tracking_now[i] <= tolerance:
-                self._rejoined_since.pop(i, None)
-            else:
-                self._rejoined_since.setdefault(i, t)
-        away = [
-            i
-            for i in self._rejoining
-            if t - self._rejoined_since.get(i, math.inf) < REJOIN_SETTLE_S
-        ]
-        if not unavailable and not away:
-            self._rejoining.clear()
-            self._rejoined_since.clear()
-            self._link_deadline = None
+        if decision.ask_operator:
+            self.view.message(
+                "error", "link lost: formation frozen. Type a speed to resume, or 'land'."
+            )
+        if decision.land is not None:
+            self.land_everyone(decision.land, now)
+        elif decision.resume:
             self._resume(now)
-        elif self._link_deadline is not None and t >= self._link_deadline:
-            gone = sorted(set(unavailable) | set(away))
-            names = ", ".join(str(i + 1) for i in gone)
-            why = unavailable.get(gone[0], "not back within its margin")
-            self.land_everyone(f"UAV {names}: {why} for {self.options.link_wait_s:g} s", now)
 
     def _collect_acks(self, now: float) -> None:
         speedup = self.options.speedup

@@ -41,8 +41,8 @@ bench: $(EXTRAS_STAMP)
 	$(BIN)/python -m bench
 
 lint: $(STAMP)
-	$(BIN)/ruff check fleetwire gcs medium planner vehicles tests bench
-	$(BIN)/ruff format --check fleetwire gcs medium planner vehicles tests bench
+	$(BIN)/ruff check fleetline fleetwire gcs medium planner vehicles tests bench
+	$(BIN)/ruff format --check fleetline fleetwire gcs medium planner vehicles tests bench
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

@@ -69,7 +69,9 @@ class WorldBounds:
 
     @property
     def running(self) -> bool:
-        return math.isfinite(self.zero)
+        """The world runs: its zero is set and its speed-up is a positive number. (A body of
+        zeros, as a file read while it is created or cut short holds, is not a world.)"""
+        return math.isfinite(self.zero) and math.isfinite(self.speedup) and self.speedup > 0
 
     def world_time(self, wall: float) -> float:
         """The world time at monotonic `wall` (capped; NaN before the world runs)."""
@@ -77,7 +79,7 @@ class WorldBounds:
 
     def wall_at(self, world: float) -> float:
         """The monotonic instant the world reaches `world` (inf: not before the cap rises)."""
-        if world > self.cap:
+        if world > self.cap or not self.running:
             return math.inf
         return self.zero + world / self.speedup
 
@@ -216,7 +218,9 @@ class FollowerClock:
         if self.world is None:
             return
         bounds = self.world.bounds()
-        if bounds.running and self.offset is None:
+        if not bounds.running:
+            return  # not started yet, or not a world: keep the bounds read before
+        if self.offset is None:
             free = (wall - self.wall0) * self.speedup
             self.offset = free - bounds.world_time(wall)
             self._last = free

@@ -169,3 +169,21 @@ def test_hold_back_never_goes_below_a_mission_time_already_read():
     assert clock.mission_time(51.0) == pytest.approx(stamped)
     assert clock.peek(51.2) == pytest.approx(1.0)  # and runs on from there
     assert clock.hold_back(51.2, 0.5) == pytest.approx(0.5)  # peeked, not read: free to hold
+
+
+def test_a_body_of_zeros_is_no_world_and_never_stops_a_follower(master):
+    """Bounds of zeros (a clock file read as it is created or cut short; once seen in CI, where
+    the medium divided by the zero speed-up and exited, and every link was lost) neither make
+    a follower join nor replace the bounds it joined with."""
+    clock = FollowerClock(SPEEDUP, wall0=0.0, world=WorldClockFollower(master.path, 0))
+    master.publish(zero=0.0, speedup=0.0, cap=0.0)
+    clock.refresh(1.0)
+    assert not clock.joined and clock.wall_at(10.0) == pytest.approx(2.0)  # its own clock
+    master.publish(zero=0.0, speedup=SPEEDUP, cap=50.0)
+    clock.refresh(1.0)
+    assert clock.joined
+    joined_at = clock.wall_at(10.0 + clock.offset)
+    master.publish(zero=0.0, speedup=0.0, cap=0.0)
+    clock.refresh(2.0)
+    assert clock.wall_at(10.0 + clock.offset) == joined_at == pytest.approx(2.0)
+    assert clock.now(2.0) == pytest.approx(10.0 + clock.offset)

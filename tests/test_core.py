@@ -17,9 +17,9 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.flight.answers import AnswerResult
-from gcs.flight.core import STILL_BEFORE_LANDING_S
 from gcs.flight.hold import HOLD_LAG_S
 from gcs.flight.rejoin import REJOIN_SETTLE_S
+from gcs.flight.schedule import STILL_BEFORE_LANDING_S
 from gcs.link import MemoryLink
 from gcs.mission import load_mission
 from gcs.planning import plan_mission

@@ -80,6 +80,7 @@ from gcs.flight.records import (
 )
 from gcs.flight.rejoin import RejoinPolicy
 from gcs.flight.roster import Roster
+from gcs.flight.schedule import Schedule, ScheduleDecision, UavProgress
 from gcs.flight.stall import Resume, resume_point
 from gcs.geodesy import enu_to_geodetic
 from gcs.link import mavutil
@@ -121,10 +122,6 @@ MAX_EXTRAPOLATION_S = 1.0
 STALL_S = 1.0
 #: ... and at least this late on the wall clock (the vehicles' timeouts have this floor).
 STALL_WALL_FLOOR_S = 0.25
-#: A UAV is told to land only once its reference has been still this long (mission s): if the
-#: LAND request is lost, the setpoints the vehicle keeps extrapolating carry no braking
-#: feed-forward (extrapolated for 1 s, a braking one would fly it back along the path).
-STILL_BEFORE_LANDING_S = 0.5
 #: After the last landing, how long (wall s) the GCS waits for disarming and commands in flight.
 SETTLE_WALL_S = 3.0
 #: Why an operator's speed change is refused while a stations mission's fleet holds.
@@ -1472,45 +1469,48 @@ class GroundStation:
         )
         if roster is not None and roster.reshaped:
             stays = roster.expand(stays, False)
-        late = []
-        for index, driver in enumerate(self.drivers):
+        decision = ScheduleDecision()
+        if not self.aborting:
+            uavs = [
+                UavProgress(
+                    relieved=bool(relieved[index]),
+                    stays=bool(stays[index]),
+                    not_up=driver.phase in (Phase.READY, Phase.ARMING, Phase.TAKING_OFF),
+                    following=driver.phase == Phase.FOLLOWING,
+                    takeoff_sent=track.takeoff_sent,
+                    land_sent=track.land_sent,
+                )
+                for index, (driver, track) in enumerate(zip(self.drivers, self.tracks, strict=True))
+            ]
+            schedule = Schedule(
+                lead, self.options.landing_tolerance_m, self.options.landing_settle_s
+            )
+            decision = schedule.decide(
+                t, uavs, departures, arrivals, horizon, self.window_s, lands,
+                lambda index: self._slot_offset(index, t),
+            )  # fmt: skip
+        stay, takeoff, land = set(decision.stay), set(decision.takeoff), set(decision.land)
+        for index, driver in enumerate(self.drivers):  # per UAV, in the order of its actions
             track = self.tracks[index]
-            if self.aborting:
-                break
-            if relieved[index]:
+            if index in stay:
+                track.land_sent = True
+                driver.land(now)
+                text = (
+                    f"UAV {index + 1} lands back on its start slot: the return came before "
+                    "it left it"
+                    if track.takeoff_sent
+                    else f"UAV {index + 1} stays on its start slot: the return came first"
+                )
+                self._event(MonitorEvent(t, "info", "stays", text, index + 1), now)
                 continue
-            if stays[index]:
-                if not track.land_sent:
-                    track.land_sent = True
-                    driver.land(now)
-                    text = (
-                        f"UAV {index + 1} lands back on its start slot: the return came before "
-                        "it left it"
-                        if track.takeoff_sent
-                        else f"UAV {index + 1} stays on its start slot: the return came first"
-                    )
-                    self._event(MonitorEvent(t, "info", "stays", text, index + 1), now)
-                continue
-            if not track.takeoff_sent and t >= departures[index] - lead:
+            if index in takeoff:
                 track.takeoff_sent = True
                 track.takeoff_time = t
                 driver.takeoff(self.altitude, now)
-            not_up = driver.phase in (Phase.READY, Phase.ARMING, Phase.TAKING_OFF)
-            if not_up and departures[index] <= horizon:
-                late.append(driver.uav_id)
-            if (
-                lands
-                and driver.phase == Phase.FOLLOWING
-                and not track.land_sent
-                and t >= arrivals[index] + self.window_s / 2 + STILL_BEFORE_LANDING_S
-            ):
-                offset = self._slot_offset(index, t)
-                if (
-                    offset <= self.options.landing_tolerance_m
-                    or t >= arrivals[index] + self.window_s / 2 + self.options.landing_settle_s
-                ):
-                    track.land_sent = True
-                    driver.land(now)
+            if index in land:
+                track.land_sent = True
+                driver.land(now)
+        late = list(decision.late)
         if late and self.frozen_by is None:
             self._event(
                 MonitorEvent(

@@ -29,8 +29,8 @@ from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, RunOptions
 from gcs.flight.live import LiveLoop
 from gcs.link import Link
-from gcs.logs.recording import FlightRecorder
 from gcs.mission import parse_mission
+from gcs.recording.recording import FlightRecorder
 from planner.formation import min_fleet_size, parking_rows
 from planner.kinematics import LineFormation, SpeedProfile
 

@@ -1,6 +1,6 @@
 """Flight recording: CPU cost per message, and per UAV at the 10 Hz setpoint rate.
 
-The recorder (`gcs.logs.recording.FlightRecorder`) is fed what a flight of the simulated backend
+The recorder (`gcs.recording.recording.FlightRecorder`) is fed what a flight of the simulated backend
 produces, per UAV and per 0.1 s tick (counted in a recording of `examples/small.yaml`): four
 telemetry messages received (GLOBAL_POSITION_INT, LOCAL_POSITION_NED, ATTITUDE, SIM_STATE),
 six more once a second (HEARTBEAT, SYS_STATUS, ...), one setpoint sent (and two more messages
@@ -26,9 +26,9 @@ from gcs.errors import InputError
 from gcs.flight.clock import MissionClock
 from gcs.flight.records import MetricsRecord, SetpointRecord, UavStateRecord
 from gcs.link import mavutil
-from gcs.logs.recording import FlightRecorder
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
+from gcs.recording.recording import FlightRecorder
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "table-ii.yaml"
 RATE_HZ = 10.0

@@ -137,7 +137,7 @@ def sniffed(log: Path | None) -> dict[str, list[bytes]]:
     frames: dict[str, list[bytes]] = {"tx": [], "rx": []}
     if log is None or not log.exists():
         return frames
-    from gcs.logs.logreader import read_recording
+    from gcs.recording.logreader import read_recording
 
     wanted = {
         "tx": {"SET_POSITION_TARGET_GLOBAL_INT", "COMMAND_LONG", "COMMAND_INT", "HEARTBEAT"},

@@ -30,8 +30,8 @@ from fleetline.errors import UsageError
 from gcs.flight.clock import MissionClock
 from gcs.flight.records import MetricsRecord
 from gcs.link import Link
-from gcs.logs.logreader import read_recording
-from gcs.logs.recording import FlightRecorder
+from gcs.recording.logreader import read_recording
+from gcs.recording.recording import FlightRecorder
 from gcs.signing import FleetSigning
 from tests.attacker import codec, mutate, timestamp_now
 from tests.conftest import MISSIONS

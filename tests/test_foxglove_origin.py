@@ -1,11 +1,11 @@
-"""Who may open the live Foxglove port from a browser (gcs.logs.foxglove_front): the `Origin`
+"""Who may open the live Foxglove port from a browser (gcs.recording.foxglove_front): the `Origin`
 of the upgrade request, on request heads alone (the port itself: test_run_recording.py)."""
 
 from __future__ import annotations
 
 import pytest
 
-from gcs.logs.foxglove_front import refused_origin
+from gcs.recording.foxglove_front import refused_origin
 
 
 def head(origin: str | None) -> bytes:

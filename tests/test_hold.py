@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from gcs.flight.hold import HOLD_LAG_S, HoldPolicy, UavState
-from gcs.logs.logreader import read_recording
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
+from gcs.recording.logreader import read_recording
 from gcs.sim.fastsim import FastOptions, Faults, fly_fast
 
 MISSION = Path(__file__).resolve().parent / "missions" / "core.yaml"

@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from gcs.logs.logreader import read_recording
+from gcs.recording.logreader import read_recording
 from tests.flying import Flight, children_running, flight_speedup, mission_file
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]

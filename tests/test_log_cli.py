@@ -10,7 +10,7 @@ import pytest
 
 from gcs.flight.clock import MissionClock
 from gcs.link import mavutil
-from gcs.logs.recording import FlightRecorder
+from gcs.recording.recording import FlightRecorder
 from tests.cli_refusals import one_line_exit_2
 
 
@@ -96,8 +96,8 @@ def test_replay_refusals(gcs_log, events_only, tiny_flight):
 
 @pytest.mark.slow
 def test_replay_keeps_the_recorded_spacing_divided_by_the_rate(gcs_log, tiny_flight):
-    from gcs.logs.logreader import read_recording
-    from gcs.logs.replay import open_output, recorded_frames, replay
+    from gcs.recording.logreader import read_recording
+    from gcs.recording.replay import open_output, recorded_frames, replay
 
     sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sink.bind(("127.0.0.1", 0))

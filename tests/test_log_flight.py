@@ -40,7 +40,7 @@ MISSION = REPO / "examples" / "small.yaml"
 SPEEDUP = str(flight_speedup(5))  # lower on a busy machine (tests/flying.py)
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
-#: Topics every UAV has, and the fleet-wide ones (docs/outputs.md, MCAP; gcs.logs.recording).
+#: Topics every UAV has, and the fleet-wide ones (docs/outputs.md, MCAP; gcs.recording.recording).
 UAV_TOPICS = ("/uav{n}/fix", "/uav{n}/target", "/uav{n}/setpoint", "/uav{n}/state",
               "/mavlink/{n}/rx", "/mavlink/{n}/tx")  # fmt: skip
 FLEET_TOPICS = ("/plan", "/scene", "/tf", "/events", "/speed", "/metrics", "/fleet",
@@ -131,7 +131,7 @@ class Read:
 
 @pytest.fixture(scope="module")
 def read(flown) -> Read:
-    """The recording read with `mcap` and `mcap-protobuf-support` only (not gcs.logs.logreader)."""
+    """The recording read with `mcap` and `mcap-protobuf-support` only (not gcs.recording.logreader)."""
     with open(flown.log, "rb") as handle:
         reader = make_reader(handle, decoder_factories=[DecoderFactory(), JsonDecoder()])
         summary = reader.get_summary()
@@ -318,7 +318,7 @@ def test_log_info_reads_a_cut_recording_and_says_so(flown, read, gcs_log, tmp_pa
 
 # --------------------------------------------------------------------------- gcs log report
 def test_log_report_writes_every_figure_and_the_numbers(flown, read, gcs_log, tmp_path):
-    from gcs.logs.report import FIGURES
+    from gcs.recording.report import FIGURES
 
     out_dir = tmp_path / "report"
     code, out, err = gcs_log("log", "report", flown.log, "--out", out_dir)
@@ -358,7 +358,7 @@ def test_log_report_writes_every_figure_and_the_numbers(flown, read, gcs_log, tm
 
 
 def test_log_report_on_a_cut_recording(flown, gcs_log, tmp_path):
-    from gcs.logs.report import FIGURES
+    from gcs.recording.report import FIGURES
 
     data = flown.log.read_bytes()
     cut = tmp_path / "cut.mcap"
@@ -438,9 +438,9 @@ def test_the_flight_was_served_live_with_the_same_channels(flown, read):
 
 
 def test_the_committed_layout_is_current_and_shows_recorded_topics(flown, read):
-    from gcs.logs.layout import LAYOUT_PATH, layout_text
+    from gcs.recording.layout import LAYOUT_PATH, layout_text
 
-    assert LAYOUT_PATH.read_text() == layout_text(), "run python -m gcs.logs.layout"
+    assert LAYOUT_PATH.read_text() == layout_text(), "run python -m gcs.recording.layout"
     layout = json.loads(LAYOUT_PATH.read_text())
     recorded = {m[0] for m in read.messages}
     panels = []

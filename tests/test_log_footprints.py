@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from gcs.logs.logreader import Recording
-from gcs.logs.recording import mission_geojson_files
-from gcs.logs.report import _mission
 from gcs.mission import load_mission
+from gcs.recording.logreader import Recording
+from gcs.recording.recording import mission_geojson_files
+from gcs.recording.report import _mission
 from tests.footprint_files import MESSY
 from tests.mission_texts import MINIMAL
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from gcs.flight.clock import MissionClock
-from gcs.logs.recording import FlightRecorder
+from gcs.recording.recording import FlightRecorder
 
 FULL = Path("/dev/full")
 

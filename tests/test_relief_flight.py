@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 import yaml
 
-from gcs.logs.logreader import read_recording
-from gcs.logs.report import flight_metrics, load_flight
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
+from gcs.recording.logreader import read_recording
+from gcs.recording.report import flight_metrics, load_flight
 from gcs.sim.fastsim import FastOptions, Faults, fly_fast
 from planner.formation import collision_spacing
 from tests.conftest import MISSIONS

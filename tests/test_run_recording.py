@@ -29,7 +29,7 @@ from gcs.flight.records import (
     UavStateRecord,
 )
 from gcs.link import mavutil
-from gcs.logs.recording import SCHEMAS, FlightRecorder
+from gcs.recording.recording import SCHEMAS, FlightRecorder
 from tests.foxglove_client import (
     foxglove_channels,
     foxglove_connect,
@@ -245,7 +245,7 @@ def _anchored_clock() -> tuple[MissionClock, FakeWall]:
 
 def test_describe_makes_the_recording_self_contained(tmp_path: Path, planned):
     from gcs.geodesy import lonlat_to_local
-    from gcs.logs.scene import DISPLAY_HEIGHT_FACTOR
+    from gcs.recording.scene import DISPLAY_HEIGHT_FACTOR
 
     mission, plan, plan_data, folder = planned
     clock, wall = _anchored_clock()
@@ -313,7 +313,7 @@ def test_describe_makes_the_recording_self_contained(tmp_path: Path, planned):
 
 
 def test_the_fleet_moves_frames_and_links_at_every_tick(tmp_path: Path, planned):
-    from gcs.logs.scene import MAST_HEIGHT_M
+    from gcs.recording.scene import MAST_HEIGHT_M
 
     _, plan, plan_data, _ = planned
     clock, wall = _anchored_clock()
@@ -362,12 +362,12 @@ def test_the_fleet_moves_frames_and_links_at_every_tick(tmp_path: Path, planned)
 
 @pytest.mark.slow
 def test_a_killed_writer_leaves_a_file_readable_up_to_the_last_second(tmp_path: Path):
-    from gcs.logs.logreader import read_recording
+    from gcs.recording.logreader import read_recording
 
     path = tmp_path / "killed.mcap"
     script = f"""
 import sys, time
-from gcs.logs.recording import FlightRecorder
+from gcs.recording.recording import FlightRecorder
 from gcs.flight.clock import MissionClock
 from gcs.flight.records import MetricsRecord
 clock = MissionClock()
@@ -452,7 +452,7 @@ def test_the_recording_is_served_live_over_foxglove_websocket(tmp_path: Path, su
 
 @pytest.mark.slow
 def test_a_taken_port_is_refused_before_the_file_is_created(tmp_path: Path):
-    from gcs.logs.recording import LiveServerError
+    from gcs.recording.recording import LiveServerError
 
     busy = socket.socket()
     busy.bind(("127.0.0.1", 0))
@@ -486,8 +486,8 @@ def test_mission_run_refuses_a_taken_foxglove_port_with_one_line(tmp_path, monke
 
 def test_radio_counters_reach_the_report(tmp_path: Path, planned):
     """With a radio medium's counters in the log, the report draws them (figs. 12-13)."""
-    from gcs.logs.logreader import read_recording
-    from gcs.logs.report import FIGURES, write_report
+    from gcs.recording.logreader import read_recording
+    from gcs.recording.report import FIGURES, write_report
 
     _, plan, plan_data, _ = planned
     clock, wall = _anchored_clock()

@@ -27,7 +27,7 @@ HEAVY = (
     "gcs.link",
     "gcs.drivers",
     "gcs.flight",
-    "gcs.logs",
+    "gcs.recording",
     "gcs.plot",
     "gcs.sim.eval",
     "gcs.sim.fastsim",

@@ -19,8 +19,8 @@ import pytest
 import yaml
 
 from gcs.geodesy import geodetic_to_enu
-from gcs.logs.logreader import read_recording
 from gcs.mission import load_mission
+from gcs.recording.logreader import read_recording
 from gcs.sim.sitl import plan_for_launch
 from tests.conftest import MISSIONS
 from tests.fakes.common import enu_to_global

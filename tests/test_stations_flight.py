@@ -26,10 +26,10 @@ import pytest
 from gcs.flight.answers import AnswerResult, OperatorAnswer, OperatorCommand
 from gcs.flight.live import LiveLoop
 from gcs.flight.records import ReturnRecord
-from gcs.logs.logreader import read_recording
-from gcs.logs.report import flight_metrics, load_flight
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
+from gcs.recording.logreader import read_recording
+from gcs.recording.report import flight_metrics, load_flight
 from gcs.sim.fastsim import FastOptions, Faults, _LockstepMission, fly_fast, with_fleet_size
 from gcs.speed import OperatorSocket, send_operator_command, socket_path_for
 from tests.conftest import MISSIONS

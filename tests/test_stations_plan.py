@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.logs.scene import SceneGeometry, plan_geojson
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
+from gcs.recording.scene import SceneGeometry, plan_geojson
 from planner.formation import collision_spacing, radio_spacing
 from tests.conftest import EXAMPLES
 

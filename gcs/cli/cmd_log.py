@@ -23,7 +23,7 @@ from gcs.cli.outputs import output_folder
 from gcs.errors import EXIT_BAD_INPUT, InputError
 
 if TYPE_CHECKING:  # the MCAP reader is imported when a command reads a log
-    from gcs.logs.logreader import Recording
+    from gcs.recording.logreader import Recording
 
 EXIT_OK = 0
 
@@ -149,7 +149,7 @@ def _seconds(value: float | None) -> str:
 
 
 def info_command(args: argparse.Namespace) -> int:
-    from gcs.logs.logreader import read_recording
+    from gcs.recording.logreader import read_recording
 
     recording = read_recording(args.log, keep=lambda topic: topic in ("/plan", "/metrics"))
     data = describe(recording)
@@ -195,8 +195,8 @@ def info_command(args: argparse.Namespace) -> int:
 
 # --------------------------------------------------------------------------- report
 def report_command(args: argparse.Namespace) -> int:
-    from gcs.logs.logreader import read_recording
-    from gcs.logs.report import write_report
+    from gcs.recording.logreader import read_recording
+    from gcs.recording.report import write_report
 
     out = output_folder(args.out, "--out")
     recording = read_recording(args.log, keep=lambda topic: not topic.startswith("/mavlink/"))
@@ -221,8 +221,8 @@ def _metres(value: float | None) -> str:
 
 # --------------------------------------------------------------------------- replay
 def replay_command(args: argparse.Namespace) -> int:
-    from gcs.logs.logreader import read_recording
-    from gcs.logs.replay import ReplayError, open_output, recorded_frames, replay
+    from gcs.recording.logreader import read_recording
+    from gcs.recording.replay import ReplayError, open_output, recorded_frames, replay
 
     if not (math.isfinite(args.rate) and args.rate > 0):
         raise InputError(None, "--rate", f"a number > 0, got {args.rate:g}")

@@ -32,7 +32,7 @@ from gcs.planning import plan_json, plan_within_limits
 if TYPE_CHECKING:
     from gcs.drivers.sim import SimVehicleSetup
     from gcs.flight.forward import Forwarder
-    from gcs.logs.recording import FlightRecorder
+    from gcs.recording.recording import FlightRecorder
 
 #: Highest setpoint rate the scheduler streams (mission time), Hz.
 MAX_SETPOINT_RATE_HZ = 50.0
@@ -203,7 +203,7 @@ def run_command(args: argparse.Namespace) -> int:  # noqa: C901 (over 15 branche
     from gcs.flight.forward import Forwarder
     from gcs.flight.live import LiveLoop
     from gcs.link import Link
-    from gcs.logs.recording import FlightRecorder, LiveServerError
+    from gcs.recording.recording import FlightRecorder, LiveServerError
     from gcs.signing import RunSigning
     from gcs.sim.radio import medium_setup
     from gcs.speed import OperatorSocket, socket_path_for

@@ -306,7 +306,7 @@ class _NoView:
 
 class Recorder(Protocol):
     """What the core records, as typed records (`gcs.flight.records`); `wall` is the loop's
-    time of the thing recorded (gcs.logs.recording.FlightRecorder implements it).
+    time of the thing recorded (gcs.recording.recording.FlightRecorder implements it).
     `keeps_samples` False: the per-UAV setpoint and state records would be thrown away, so the
     core does not build them (the fast mode's `NullRecorder`: 60 k records a mission)."""
 

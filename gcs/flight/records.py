@@ -4,7 +4,7 @@ The core (`gcs.flight.core.GroundStation`) decides what happened; a recorder dec
 keep it. Between them travel these value types, never loose dicts. Each record knows its own
 JSON form (`to_json`), the payload of its MCAP topic (docs/outputs.md, "MCAP topics"): the
 fields that are always written appear even when they are null, the optional ones are left out
-when they are None. The JSON schemas the recorder registers (`gcs.logs.recording.SCHEMAS`) list
+when they are None. The JSON schemas the recorder registers (`gcs.recording.recording.SCHEMAS`) list
 the same field names; a test keeps the two in step.
 """
 

@@ -237,8 +237,8 @@ def scenario_from_recording(path: Path) -> NetScenario:
     users (the attached mission file; without it A and B from the plan, no ground user), and
     the leaders' requests (`/speed`). Bad input raises `InputError` (exit 2)."""
     from gcs.errors import InputError
-    from gcs.logs.logreader import read_recording
-    from gcs.logs.report import load_flight
+    from gcs.recording.logreader import read_recording
+    from gcs.recording.report import load_flight
 
     recording = read_recording(Path(path), keep=lambda topic: not topic.startswith("/mavlink/"))
     flight = load_flight(recording)  # InputError without a plan

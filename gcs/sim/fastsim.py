@@ -322,7 +322,7 @@ class _LockstepMission:
 
     def _recorder(self, path: Path):
         """A `FlightRecorder` on the simulated clock, the plan described."""
-        from gcs.logs.recording import FlightRecorder
+        from gcs.recording.recording import FlightRecorder
 
         recorder = FlightRecorder(path, self.clock, force=True)
         recorder.describe(self.plan, plan_json(self.plan), 0.0)

@@ -7,7 +7,7 @@ Right: tracking error per UAV (one series per array index of `/metrics.tracking_
 the layout fits any fleet size), the instant's smallest UAV-UAV and UAV-obstacle distances
 (`/fleet`), the formation's speed, and the event log.
 
-`python -m gcs.logs.layout` rewrites the committed file; `--check` exits 1 if it is stale.
+`python -m gcs.recording.layout` rewrites the committed file; `--check` exits 1 if it is stale.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import foxglove.layouts as fl
 
-from gcs.logs.scene import MAP_FRAME, uav_colour
+from gcs.recording.scene import MAP_FRAME, uav_colour
 
 #: Where the layout is committed.
 LAYOUT_PATH = Path(__file__).resolve().parents[2] / "layouts" / "fleetline-layout.json"
@@ -161,7 +161,7 @@ def layout_text() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m gcs.logs.layout", description="Write (or check) the Foxglove layout."
+        prog="python -m gcs.recording.layout", description="Write (or check) the Foxglove layout."
     )
     parser.add_argument("--out", type=Path, default=LAYOUT_PATH, help="file to write")
     parser.add_argument("--check", action="store_true", help="exit 1 if the file is stale")
@@ -170,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.check:
         current = args.out.read_text() if args.out.exists() else ""
         if current != text:
-            print(f"{args.out} is stale: run python -m gcs.logs.layout", file=sys.stderr)
+            print(f"{args.out} is stale: run python -m gcs.recording.layout", file=sys.stderr)
             return 1
         return 0
     args.out.parent.mkdir(parents=True, exist_ok=True)

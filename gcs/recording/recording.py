@@ -4,7 +4,7 @@ Topics. Foxglove's well-known schemas (protobuf), so its panels work without con
 * `/uav<n>/fix` (`foxglove.LocationFix`): the position UAV n reports (Map panel);
   `/uav<n>/target`: the setpoint streamed to it, same type;
 * `/scene` (`foxglove.SceneUpdate`): obstacles, margins, planned path, parking rows, base
-  stations, ground users, UAVs, virtual targets and radio links (see `gcs.logs.scene`);
+  stations, ground users, UAVs, virtual targets and radio links (see `gcs.recording.scene`);
 * `/tf` (`foxglove.FrameTransforms`): `map -> uav<n>` and `map -> uav<n>/target` every tick;
 * `/events` (`foxglove.Log`); `/map/obstacles` and `/map/plan` (`foxglove.GeoJSON`, lon/lat:
   building footprints and walls; path, rows, stations), repeated every `GEOJSON_PERIOD_S`.
@@ -66,8 +66,8 @@ from gcs.flight.records import (
     SpeedRecord,
     UavStateRecord,
 )
-from gcs.logs import scene
-from gcs.logs.foxglove_front import FoxgloveFront
+from gcs.recording import scene
+from gcs.recording.foxglove_front import FoxgloveFront
 from planner.sight import Sight
 
 log = logging.getLogger(__name__)
@@ -698,7 +698,7 @@ class FlightRecorder:
 
 def _serve_live(context: foxglove.Context, port: int, allowed_origins: tuple[str, ...] = ()):
     """foxglove-sdk's WebSocket server on a private loopback port behind a `FoxgloveFront` on
-    127.0.0.1:`port` (clients of both subprotocol names; see `gcs.logs.foxglove_front`). A
+    127.0.0.1:`port` (clients of both subprotocol names; see `gcs.recording.foxglove_front`). A
     taken port is refused (`LiveServerError`) before anything else starts."""
     try:
         front = FoxgloveFront("127.0.0.1", port, allowed_origins)

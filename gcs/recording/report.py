@@ -37,9 +37,9 @@ from matplotlib.figure import Figure  # noqa: E402
 from gcs import plot  # noqa: E402
 from gcs.errors import InputError  # noqa: E402
 from gcs.footprints import SHAPEFILE_SIDES, footprint_file  # noqa: E402
-from gcs.logs.logreader import Recording  # noqa: E402
 from gcs.mission import Mission, parse_mission  # noqa: E402
 from gcs.planning import MissionPlan  # noqa: E402
+from gcs.recording.logreader import Recording  # noqa: E402
 from planner.formation import ParkingRows  # noqa: E402
 from planner.guarantees import check_positions  # noqa: E402
 from planner.kinematics import LineFormation, SpeedProfile  # noqa: E402

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from fleetline.errors import FleetlineError
 from gcs.errors import InputError
 from gcs.link import GCS_SYSTEM_ID, open_connection
-from gcs.logs.logreader import Recording
+from gcs.recording.logreader import Recording
 
 log = logging.getLogger(__name__)
 

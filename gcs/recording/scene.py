@@ -1,7 +1,7 @@
 """What Foxglove's 3-D and Map panels show of a mission: scene entities, transforms, GeoJSON.
 
 Built once per run from the plan (`SceneGeometry.from_plan`), then per tick from the fleet's
-positions. No I/O here: `gcs.logs.recording` writes what these functions return.
+positions. No I/O here: `gcs.recording.recording` writes what these functions return.
 
 3-D panel (`/scene`, `foxglove.SceneUpdate`, fixed frame `map` = the mission's local frame,
 x east, y north, z up, metres):

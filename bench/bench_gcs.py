@@ -28,9 +28,9 @@ from gcs.drivers.sim import SimDriver
 from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, RunOptions
 from gcs.flight.live import LiveLoop
-from gcs.link import Link
 from gcs.mission import parse_mission
 from gcs.recording.recording import FlightRecorder
+from gcs.transport.link import Link
 from planner.formation import min_fleet_size, parking_rows
 from planner.kinematics import LineFormation, SpeedProfile
 

@@ -25,10 +25,10 @@ from rich.table import Table
 from gcs.errors import InputError
 from gcs.flight.clock import MissionClock
 from gcs.flight.records import MetricsRecord, SetpointRecord, UavStateRecord
-from gcs.link import mavutil
 from gcs.mission import load_mission
 from gcs.planning import plan_json, plan_mission
 from gcs.recording.recording import FlightRecorder
+from gcs.transport.link import mavutil
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "table-ii.yaml"
 RATE_HZ = 10.0

@@ -14,8 +14,8 @@ import time
 from rich.console import Console
 from rich.table import Table
 
-from gcs.signing import ClockedSigning
-from gcs.signing import mavlink as gcs_mavlink
+from gcs.transport.signing import ClockedSigning
+from gcs.transport.signing import mavlink as gcs_mavlink
 from vehicles.link import make_codec
 from vehicles.signing import VehicleSigning
 

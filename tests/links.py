@@ -1,11 +1,11 @@
-"""Helpers of the tests of `gcs.link` over real loopback UDP: receiving what a link hears."""
+"""Helpers of the tests of `gcs.transport.link` over real loopback UDP: receiving what a link hears."""
 
 from __future__ import annotations
 
 import selectors
 import time
 
-from gcs.link import Link
+from gcs.transport.link import Link
 
 
 def drain(link: Link, until, seconds: float = 5.0) -> list:

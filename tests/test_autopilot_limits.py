@@ -14,7 +14,7 @@ import pytest
 from gcs.drivers.commands import Backoff
 from gcs.drivers.limits import ARDUCOPTER, PX4, AutopilotLimits, exceeded
 from gcs.drivers.parameters import Encoding, ParameterTable, decode_value, encode_value
-from gcs.link import mavutil
+from gcs.transport.link import mavutil
 
 mavlink = mavutil.mavlink
 SITL = Path(__file__).resolve().parent / "sitl"

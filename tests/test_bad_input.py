@@ -29,10 +29,10 @@ import vehicles.cli
 from fleetline.errors import UsageError
 from gcs.flight.clock import MissionClock
 from gcs.flight.records import MetricsRecord
-from gcs.link import Link
 from gcs.recording.logreader import read_recording
 from gcs.recording.recording import FlightRecorder
-from gcs.signing import FleetSigning
+from gcs.transport.link import Link
+from gcs.transport.signing import FleetSigning
 from tests.attacker import codec, mutate, timestamp_now
 from tests.conftest import MISSIONS
 from tests.flying import MISSION, Flight, mission_file
@@ -228,7 +228,7 @@ def test_a_connection_refused_at_start_is_one_line_naming_the_endpoint(capsys, t
     refusal = err.splitlines()[-1]
     assert refusal.startswith("--connect: ") and urls[0] in refusal and "refused" in refusal
     assert "Traceback" not in err
-    assert all("gcs.link" in line for line in err.splitlines()[:-1] if "refused" in line)
+    assert all("gcs.transport.link" in line for line in err.splitlines()[:-1] if "refused" in line)
 
 
 def test_an_unknown_host_in_the_mission_names_the_connection(capsys, tmp_path):

@@ -20,10 +20,10 @@ from gcs.flight.answers import AnswerResult
 from gcs.flight.hold import HOLD_LAG_S
 from gcs.flight.rejoin import REJOIN_SETTLE_S
 from gcs.flight.schedule import STILL_BEFORE_LANDING_S
-from gcs.link import MemoryLink
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
 from gcs.sim.fastsim import FastOptions, Faults, fly_fast
+from gcs.transport.link import MemoryLink
 
 MISSION = Path(__file__).resolve().parent / "missions" / "core.yaml"
 

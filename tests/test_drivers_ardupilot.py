@@ -14,7 +14,7 @@ import pytest
 
 from gcs.drivers.base import Phase
 from gcs.geodesy import Origin
-from gcs.link import mavutil
+from gcs.transport.link import mavutil
 from tests.fakes.ardupilot import GUIDED, LAND, ArduCopterModel, ArduCopterParams
 from tests.fakes.flight import Flight, SinkDriver, home_of, hover, leg
 from tests.fakes.replay import drive, load, reencode

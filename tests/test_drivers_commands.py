@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gcs.drivers.commands import Backoff, VehicleTexts
-from gcs.link import mavutil
+from gcs.transport.link import mavutil
 
 mavlink = mavutil.mavlink
 WARNING, INFO, CRITICAL = (

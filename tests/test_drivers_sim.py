@@ -17,10 +17,10 @@ from gcs.drivers import BackendUnavailable, driver_class
 from gcs.drivers.base import DriverTiming, Phase, UavSpec
 from gcs.drivers.sim import SimDriver, SimFleet, SimVehicleSetup
 from gcs.geodesy import Origin
-from gcs.link import Link, mavutil
 from gcs.mission import load_mission
 from gcs.planning import plan_mission
 from gcs.speed import SpeedChange
+from gcs.transport.link import Link, mavutil
 from tests.conftest import MISSIONS
 from tests.flying import flight_speedup
 from vehicles.cli import build_parser, config_from_args

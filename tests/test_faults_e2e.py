@@ -21,7 +21,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from fleetwire.modes import COPTER_MODE
 from gcs.recording.logreader import read_recording
 from gcs.recording.recording import FLUSH_PERIOD_S
-from gcs.signing import load_or_create_key
+from gcs.transport.signing import load_or_create_key
 from tests.flying import (
     Flight,
     UdpProxy,

@@ -1,5 +1,5 @@
 """`gcs mission run --out URL`: other tools watch a live mission, and what they send reaches
-the UAV it names with no more authority than the tool has (gcs/flight/forward.py)."""
+the UAV it names with no more authority than the tool has (gcs/transport/forward.py)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from gcs.flight.forward import Forwarder
-from gcs.link import Link, mavutil
+from gcs.transport.forward import Forwarder
+from gcs.transport.link import Link, mavutil
 from tests.flying import MISSION, Flight, flight_speedup
 from vehicles.ports import free_udp_ports
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from gcs.flight.clock import MissionClock
-from gcs.link import mavutil
 from gcs.recording.recording import FlightRecorder
+from gcs.transport.link import mavutil
 from tests.cli_refusals import one_line_exit_2
 
 

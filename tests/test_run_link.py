@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from gcs.link import BACKLOG_DATAGRAMS, Link, mavutil
+from gcs.transport.link import BACKLOG_DATAGRAMS, Link, mavutil
 from tests.links import drain
 
 # Every test here starts a process or flies over UDP.
@@ -42,7 +42,7 @@ def test_liveness_counts_only_the_expected_system_and_survives_garbage():
 
         rng = random.Random(4)
         sent = 0
-        for _ in range(20):  # in bursts below a backlog (`gcs.link.BACKLOG_DATAGRAMS`)
+        for _ in range(20):  # in bursts below a backlog (`gcs.transport.link.BACKLOG_DATAGRAMS`)
             for _ in range(BACKLOG_DATAGRAMS // 2 - 1):
                 size = rng.randrange(1, 300)
                 vehicle.sendto(bytes(rng.randrange(256) for _ in range(size)), gcs_address)

@@ -28,8 +28,8 @@ from gcs.flight.records import (
     SpeedRecordKind,
     UavStateRecord,
 )
-from gcs.link import mavutil
 from gcs.recording.recording import SCHEMAS, FlightRecorder
+from gcs.transport.link import mavutil
 from tests.foxglove_client import (
     foxglove_channels,
     foxglove_connect,

@@ -21,8 +21,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from fleetwire.modes import COPTER_MODE
 from fleetwire.signing import ClockedSigning, clock_timestamp
 from gcs.errors import InputError
-from gcs.link import Link
-from gcs.signing import EphemeralKey, FleetSigning, RejectionLog, load_or_create_key
+from gcs.transport.link import Link
+from gcs.transport.signing import EphemeralKey, FleetSigning, RejectionLog, load_or_create_key
 from tests.attacker import codec, timestamp_now
 from tests.flying import alive, environment
 from tests.links import drain

@@ -14,10 +14,10 @@ import pytest
 import yaml
 
 from gcs.geodesy import geodetic_to_enu
-from gcs.link import mavutil
 from gcs.mission import load_mission
 from gcs.recording.logreader import read_recording
 from gcs.sim.sitl import plan_for_launch
+from gcs.transport.link import mavutil
 from tests.fakes.common import enu_to_global
 from tests.sitl_fleet import SPEEDUP, fake_fleet
 

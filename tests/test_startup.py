@@ -24,7 +24,7 @@ HEAVY = (
     "matplotlib",
     "mcap",
     "mcap_protobuf",
-    "gcs.link",
+    "gcs.transport.link",
     "gcs.drivers",
     "gcs.flight",
     "gcs.recording",

@@ -31,8 +31,8 @@ from gcs.planning import plan_json, plan_within_limits
 # when `gcs mission run` runs, not when `gcs` starts: registering the command needs none of them.
 if TYPE_CHECKING:
     from gcs.drivers.sim import SimVehicleSetup
-    from gcs.flight.forward import Forwarder
     from gcs.recording.recording import FlightRecorder
+    from gcs.transport.forward import Forwarder
 
 #: Highest setpoint rate the scheduler streams (mission time), Hz.
 MAX_SETPOINT_RATE_HZ = 50.0
@@ -200,14 +200,14 @@ def run_command(args: argparse.Namespace) -> int:  # noqa: C901 (over 15 branche
     from gcs.drivers.sim import SimFleet
     from gcs.flight.clock import MissionClock
     from gcs.flight.core import GroundStation, RunOptions
-    from gcs.flight.forward import Forwarder
     from gcs.flight.live import LiveLoop
-    from gcs.link import Link
     from gcs.recording.recording import FlightRecorder, LiveServerError
-    from gcs.signing import RunSigning
     from gcs.sim.radio import medium_setup
     from gcs.speed import OperatorSocket, socket_path_for
     from gcs.summary import EXIT_ABORTED, exit_status, run_json, summary_renderable
+    from gcs.transport.forward import Forwarder
+    from gcs.transport.link import Link
+    from gcs.transport.signing import RunSigning
 
     check_arguments(args)
     mission = load_mission(args.file)

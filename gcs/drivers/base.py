@@ -115,8 +115,8 @@ from gcs.drivers.commands import (
 from gcs.drivers.limits import ARDUCOPTER, AutopilotLimits, LimitParameters
 from gcs.drivers.parameters import Encoding, ParameterTable
 from gcs.geodesy import Origin, enu_to_geodetic, geodetic_point_to_enu
-from gcs.link import Link, mavutil
 from gcs.speed import SpeedChange
+from gcs.transport.link import Link, mavutil
 
 __all__ = [
     "AIRBORNE_PHASES",

@@ -25,7 +25,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from gcs.link import mavutil
+from gcs.transport.link import mavutil
 
 mavlink = mavutil.mavlink
 

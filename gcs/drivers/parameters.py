@@ -19,7 +19,7 @@ import struct
 from dataclasses import dataclass, field
 
 from gcs.drivers.commands import Backoff
-from gcs.link import mavutil
+from gcs.transport.link import mavutil
 
 mavlink = mavutil.mavlink
 

@@ -27,9 +27,9 @@ from fleetwire.modes import COPTER_MODE, COPTER_MODE_NAME
 from fleetwire.worldclock import WorldClockMaster
 from gcs.drivers.base import CommandSpec, Driver, Fleet, FleetProblem, FlightMode
 from gcs.geodesy import Origin
-from gcs.link import mavutil
 from gcs.sim.children import start_child
 from gcs.sim.radio import MediumProcess, MediumSetup
+from gcs.transport.link import mavutil
 from vehicles.ports import free_udp_ports
 
 log = logging.getLogger(__name__)

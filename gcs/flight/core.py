@@ -83,7 +83,6 @@ from gcs.flight.roster import Roster
 from gcs.flight.schedule import Schedule, ScheduleDecision, UavProgress
 from gcs.flight.stall import Resume, resume_point
 from gcs.geodesy import enu_to_geodetic
-from gcs.link import mavutil
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
 from gcs.speed import (
     SpeedBroadcast,
@@ -91,6 +90,7 @@ from gcs.speed import (
     SpeedChanges,
     SpeedRefused,
 )
+from gcs.transport.link import mavutil
 from planner.formation import DISTANCE_TOLERANCE
 from planner.kinematics import (
     Reference,

@@ -14,9 +14,9 @@ from collections.abc import Callable
 
 from gcs.drivers.base import Fleet
 from gcs.flight.core import GroundStation, RunResult
-from gcs.flight.forward import Forwarder
 from gcs.flight.lockstep import WorldSync
 from gcs.speed import OperatorSocket
+from gcs.transport.forward import Forwarder
 
 #: Longest wait for messages while connecting (wall s).
 CONNECT_POLL_S = 0.02

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 from fleetline.errors import FleetlineError
 from gcs.errors import InputError
-from gcs.link import GCS_SYSTEM_ID, open_connection
 from gcs.recording.logreader import Recording
+from gcs.transport.link import GCS_SYSTEM_ID, open_connection
 
 log = logging.getLogger(__name__)
 

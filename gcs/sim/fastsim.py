@@ -6,7 +6,7 @@ it; only the loop around it differs. Instead of sockets and the wall clock: the 
 as the networked simulation (`vehicles.lockstep`: the dynamics and the ArduCopter-like
 autopilots of `vehicles sim`), the same radio medium model (`medium.medium.MediumModel`:
 unit-disk graph on the true positions, per-hop latency, jitter and loss, ground users and UAV
-data), in-memory links (`gcs.link.MemoryLink`), and simulated time as the loop's clock. Every
+data), in-memory links (`gcs.transport.link.MemoryLink`), and simulated time as the loop's clock. Every
 MAVLink message goes through the medium: a packet with no path is dropped, the others arrive
 after their hops' delay.
 
@@ -34,10 +34,10 @@ from gcs.flight.answers import OperatorAnswer
 from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, NullRecorder, RunOptions, RunResult
 from gcs.flight.records import run_json_radio
-from gcs.link import MemoryLink
 from gcs.planning import MissionPlan, plan_json
 from gcs.sim.radio import buildings_sight
 from gcs.summary import run_json
+from gcs.transport.link import MemoryLink
 from medium.ground_users import DEFAULT_PACKET_BYTES, GroundUser
 from medium.medium import MediumModel
 from medium.radio import DelayLine, RadioConfig

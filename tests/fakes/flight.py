@@ -18,7 +18,7 @@ import numpy as np
 from gcs.drivers import driver_class
 from gcs.drivers.base import Driver, DriverEvent, DriverTiming, UavSpec
 from gcs.geodesy import Origin, enu_to_geodetic
-from gcs.link import Link
+from gcs.transport.link import Link
 from tests.fakes.common import FakeEndpoint, Home
 from vehicles.ports import free_udp_ports
 

@@ -126,7 +126,7 @@ def drive(driver, records: list[Record], until: float, step: float = 0.02, actio
         for r in records
         if r.direction == "rx" and encodable(r)
         for m in [reencode(r)]
-        if m.get_srcSystem() == system  # what `gcs.link.Link` lets through
+        if m.get_srcSystem() == system  # what `gcs.transport.link.Link` lets through
     ]
     pending = sorted((actions or {}).items())
     now, index = 0.0, 0

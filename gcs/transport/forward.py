@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
-from gcs.link import open_connection
+from gcs.transport.link import open_connection
 
 log = logging.getLogger(__name__)
 

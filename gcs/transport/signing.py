@@ -50,7 +50,7 @@ from fleetwire.signing import (
     read_key_file,
 )
 from gcs.errors import InputError
-from gcs.link import Link, mavutil
+from gcs.transport.link import Link, mavutil
 
 log = logging.getLogger(__name__)
 mavlink = mavutil.mavlink

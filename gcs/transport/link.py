@@ -130,7 +130,7 @@ class Link(_Liveness):
 
     def setup_signing(self, secret_key: bytes, **options) -> None:
         """MAVLink 2 signing, pymavlink's `mavfile.setup_signing`: sign what is sent and refuse
-        unsigned input unless `allow_unsigned_callback` accepts it (see `gcs.signing`); refused
+        unsigned input unless `allow_unsigned_callback` accepts it (see `gcs.transport.signing`); refused
         frames are bad data, never a sign of life."""
         self._conn.setup_signing(secret_key, **options)
 
@@ -143,7 +143,7 @@ class Link(_Liveness):
             log.debug("send on %s failed: %s", self.url, error)
 
     def write_raw(self, data: bytes) -> None:
-        """Send bytes as they are: a message another tool sent (`gcs.flight.forward`), neither
+        """Send bytes as they are: a message another tool sent (`gcs.transport.forward`), neither
         signed with the fleet's key nor counted as this station's."""
         try:
             self._conn.write(data)

@@ -746,7 +746,7 @@ def plan_json(plan: MissionPlan) -> dict[str, Any]:
     }
     if plan.connectivity is not None:
         out["connectivity"] = plan.connectivity.to_json(plan.fleet_size)
-    from gcs.footprints import map_json  # the footprint files' reports (docs/outputs.md)
+    from gcs.mission.footprints import map_json  # the footprint files' reports (docs/outputs.md)
 
     out["map"] = map_json(mission.footprints)
     if plan.route is not None:

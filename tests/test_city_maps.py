@@ -105,7 +105,7 @@ def _messy_mission(tmp_path, goal_x: float) -> str:
 
 
 def _footprint_warnings(caplog) -> list[str]:
-    return [r.getMessage() for r in caplog.records if r.name == "gcs.footprints"]
+    return [r.getMessage() for r in caplog.records if r.name == "gcs.mission.footprints"]
 
 
 def test_footprint_warnings_wait_for_the_input_to_be_accepted(tmp_path, gcs_main, caplog):

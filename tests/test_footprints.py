@@ -1,4 +1,4 @@
-"""Footprint files (gcs.footprints): messy GeoJSON skipped / repaired / dropped and reported in
+"""Footprint files (gcs.mission.footprints): messy GeoJSON skipped / repaired / dropped and reported in
 one warning line, strict refusals, projected CRSs, heights, the optional OSM and GIS readers
 (skipped when their extra is absent) and the plan JSON's `map`. In-process and fast."""
 
@@ -14,7 +14,9 @@ import pytest
 import shapely
 
 from gcs.errors import InputError
-from gcs.footprints import (
+from gcs.geodesy import local_to_lonlat, lonlat_to_local
+from gcs.mission import load_mission
+from gcs.mission.footprints import (
     FootprintOptions,
     feature_height,
     file_format,
@@ -23,8 +25,6 @@ from gcs.footprints import (
     parse_height,
     read_footprints,
 )
-from gcs.geodesy import local_to_lonlat, lonlat_to_local
-from gcs.mission import load_mission
 from tests.mission_texts import LYON, MINIMAL
 
 MISSION = (
@@ -72,7 +72,7 @@ def warnings_of(caplog) -> list[str]:
     return [
         r.getMessage()
         for r in caplog.records
-        if r.name == "gcs.footprints" and r.levelno == logging.WARNING
+        if r.name == "gcs.mission.footprints" and r.levelno == logging.WARNING
     ]
 
 
@@ -104,7 +104,7 @@ MESSY_LINE = (
 
 
 def test_messy_file_is_used_and_reported_in_one_warning_line(tmp_path, caplog):
-    caplog.set_level(logging.WARNING, logger="gcs.footprints")
+    caplog.set_level(logging.WARNING, logger="gcs.mission.footprints")
     mission = load_mission(mission_with(tmp_path, MESSY))
     assert warnings_of(caplog) == [MESSY_LINE]
     assert mission.obstacle_keys == (
@@ -139,7 +139,7 @@ def test_strict_keeps_todays_refusals(tmp_path):
 
 
 def test_clean_files_give_no_warning_and_the_same_obstacles(tmp_path, caplog):
-    caplog.set_level(logging.WARNING, logger="gcs.footprints")
+    caplog.set_level(logging.WARNING, logger="gcs.mission.footprints")
     features = [feature(polygon(square(500 + 40 * k, 300))) for k in range(3)]
     plain = load_mission(mission_with(tmp_path, features))
     mapped = load_mission(mission_with(tmp_path, features, "{file: b.geojson}"))
@@ -232,7 +232,7 @@ def test_parse_height():
 
 def test_heights_decide_which_footprints_are_obstacles(tmp_path, caplog):
     """altitude 30, safety_margin 5: a footprint is an obstacle above 25 m (or without height)."""
-    caplog.set_level(logging.WARNING, logger="gcs.footprints")
+    caplog.set_level(logging.WARNING, logger="gcs.mission.footprints")
     features = [
         feature(polygon(square(500, 300)), height=10),  # 0 below
         feature(polygon(square(540, 300)), height="40 m"),  # 1 above
@@ -418,7 +418,7 @@ def write_osm(path: Path) -> None:
 
 
 def test_osm_extract_buildings_and_walls(tmp_path, caplog):
-    caplog.set_level(logging.WARNING, logger="gcs.footprints")
+    caplog.set_level(logging.WARNING, logger="gcs.mission.footprints")
     write_osm(tmp_path / "city.osm.pbf")
     path = tmp_path / "m.yaml"
     path.write_text(MISSION + "  - geojson: city.osm.pbf\n")
@@ -495,7 +495,7 @@ def test_gis_files_in_a_projected_crs(tmp_path, name, driver):
 
 def test_read_footprints_on_its_own(tmp_path):
     """The module without a mission: labelled local rings, the report, FootprintError."""
-    from gcs.footprints import FootprintError
+    from gcs.mission.footprints import FootprintError
 
     mission_with(tmp_path, MESSY)
     found = read_footprints(tmp_path / "b.geojson", FootprintOptions("b.geojson"), LYON)

@@ -63,7 +63,7 @@ print(json.dumps(found))
     )
     found = json.loads(done.stdout.splitlines()[-1])
     assert len(found) >= 18
-    yaml_internal = {"gcs.mission._DuplicateKey"}  # raised and caught inside the YAML loader
+    yaml_internal = {"gcs.mission.parser._DuplicateKey"}  # raised and caught inside the YAML loader
     rootless = sorted(name for name, status in found.items() if status is None)
     assert set(rootless) <= yaml_internal, rootless
     assert {found["gcs.errors.InputError"], found["fleetline.errors.UsageError"]} == {2}

@@ -15,7 +15,7 @@ import sys
 import pytest
 import yaml
 
-import gcs.mission
+import gcs.mission.parser
 from tests.conftest import REPO
 
 #: Top-level packages (and gcs modules) that planning a mission must not import.
@@ -87,12 +87,12 @@ def test_planning_imports_no_flight_stack_mcap_or_matplotlib(tmp_path):
 
 @pytest.mark.skipif(not yaml.__with_libyaml__, reason="PyYAML built without libyaml")
 def test_mission_files_are_read_by_libyaml():
-    assert issubclass(gcs.mission._Loader, yaml.CSafeLoader)
+    assert issubclass(gcs.mission.parser._Loader, yaml.CSafeLoader)
 
 
 def test_the_yaml_loader_keeps_line_numbers_and_yaml_1_2_floats():
     text = "a: 1e3\nb:\n  c: 1\n  c: 2\n"
-    with pytest.raises(gcs.mission._DuplicateKey) as found:
-        yaml.load(text, Loader=gcs.mission._Loader)  # noqa: S506 - a safe loader
+    with pytest.raises(gcs.mission.parser._DuplicateKey) as found:
+        yaml.load(text, Loader=gcs.mission.parser._Loader)  # noqa: S506 - a safe loader
     assert (found.value.key, found.value.line) == ("c", 4)
-    assert yaml.load("a: 1e3\n", Loader=gcs.mission._Loader) == {"a": 1000.0}  # noqa: S506
+    assert yaml.load("a: 1e3\n", Loader=gcs.mission.parser._Loader) == {"a": 1000.0}  # noqa: S506

@@ -58,7 +58,7 @@ def build_parser() -> ArgumentParser:
 
 
 #: Loggers whose warnings wait until the input is accepted: a refusal (exit 2) stays one line.
-DEFERRED_LOGGERS = ("gcs.footprints",)
+DEFERRED_LOGGERS = ("gcs.mission.footprints",)
 
 
 class _Deferred(logging.Handler):

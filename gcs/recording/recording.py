@@ -717,7 +717,7 @@ def mission_geojson_files(mission) -> dict[str, bytes]:
     """The footprint files the mission names (`obstacles[i].geojson`, as a file name or as
     `{file: ...}`), by the name written in the mission file, read from beside it (the mission
     was validated: they exist). A shapefile brings its side files (`.shx`, `.dbf`, ...)."""
-    from gcs.footprints import SHAPEFILE_SIDES, footprint_file
+    from gcs.mission.footprints import SHAPEFILE_SIDES, footprint_file
 
     try:
         data = yaml.safe_load(mission.text) or {}

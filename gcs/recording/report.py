@@ -36,8 +36,8 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from gcs import plot  # noqa: E402
 from gcs.errors import InputError  # noqa: E402
-from gcs.footprints import SHAPEFILE_SIDES, footprint_file  # noqa: E402
 from gcs.mission import Mission, parse_mission  # noqa: E402
+from gcs.mission.footprints import SHAPEFILE_SIDES, footprint_file  # noqa: E402
 from gcs.planning import MissionPlan  # noqa: E402
 from gcs.recording.logreader import Recording  # noqa: E402
 from planner.formation import ParkingRows  # noqa: E402

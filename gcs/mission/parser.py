@@ -1,67 +1,11 @@
-"""Mission file (YAML, version 1, docs/mission-file.md) -> a validated, frozen `Mission`.
-
-Everything docs/mission-file.md lists as refused is refused here with `InputError` (file, 0-based
-key path, what is expected, on one line), except the checks that need the planned path's fleet
-size (fixed size below the minimum of eq. 28, leader outside 1..N, connection count, length
-of a `sim.battery_mah` list, parking rows vs obstacles and each other, eqs. 14-15):
-`gcs.planning` makes those, naming the key too.
-
-Types: numbers must be YAML numbers (a boolean is not a number, a string is never converted;
-`1e3` is read as a number, as YAML 1.2 does); integers must be integers. Unknown keys and
-duplicate keys are refused.
-
-Defaults (every key not listed as required is optional):
-
-* `name`: the file name without its extension.
-* `origin`: `{lat: -35.363262, lon: 149.165237, alt: 584.0}`, the default home of ArduPilot's
-  SITL (CMAC, Canberra), so a SITL fleet started with its defaults shares the frame.
-* `start.theta_deg`, `goal.theta_deg`: 0 (rows aligned with A->B).
-* `parking`: `segment` (rows as long as the fleet needs; `ray` is the paper's infinite rays).
-* `speed.initial`: `speed.max`; `speed.changes`: none; `speed.cap_to_safe`: false (a
-  `speed.max` above the safe formation speed is refused instead of capped, docs/design.md 3.5).
-  A change's `leader` is a 1-based UAV number; `at` is the effective mission time, or for a
-  leader's request the time the leader sends it.
-* `fleet`: `{size: auto, backend: sim, connections: []}`.
-* `vehicle`: `{max_speed: 15, max_acceleration: 6, radius: 0.5}`; `vehicle.tracking_allowance`
-  (m): the part of the safety margin reserved for tracking error and navigation noise, default
-  30 % of `safety_margin`; the rest is the smoothing error budget used for the safe speed.
-* `base_stations`, `obstacles`, `ground_users`: none. `ground_users[i].rate_bps`: 800.
-* `sim`: `{setpoint_rate_hz: 10, seed: 1}`, `sim.noise`: `{wind_mean_mps: 0,
-  wind_direction_deg: 0, wind_gust_mps: 0.5, wind_time_s: 5, position_m: 0.1}` (mean wind,
-  direction it blows towards (counter-clockwise from east), standard deviation and
-  correlation time of the gusts, standard deviation of the navigation error on the reported
-  position). `sim.battery_mah`: unset (the simulated airframe's 8000 mAh); a number > 0 for
-  every UAV, or a list with one per UAV.
-* `radio`: `{enabled: true, hop_latency_ms: 2, jitter_ms: 1, loss: 0}`.
-* `signing.key_file`: unset (the signing layer picks its default); paths are relative to the
-  mission file.
-* `stations` (monitoring stations, use case 1: the fleet leaves A, a UAV holds each point,
-  then the fleet flies home): none. With `stations`, `goal` is optional (`Mission.goal` is
-  None without it; given, B is one more base station, not a route point).
-  `stations.order`: `tsp` (`given`: the order written); `stations.points[i].name`: `P<i+1>`;
-  `stations.points[i].dwell_s`: 0 (with one on every point and no `return`, the fleet
-  flies home once the longest has passed). A point is `x`/`y` (m) or `lat`/`lon`
-  (WGS84 degrees, through `origin` at `origin.alt`, within `MAX_FOOTPRINT_DISTANCE_M`).
-  Each point keeps safety_margin from every obstacle, 2 x safety_margin from every other
-  point and 2 sqrt 2 x safety_margin from A (the parking row).
-  `stations.relieve_below_pct` (a number in (0, 100)): unset, no UAV is relieved for its
-  battery; set, a UAV on station whose SYS_STATUS battery_remaining falls below it is relieved
-  (it flies home alone, the others close the gap).
-* `return.at` (only with `stations`): unset, the fleet flies home on the operator's command.
-
-Obstacles: `rectangle` (center, size, angle_deg) and `polygon` are solid polygons, `segment` a
-wall, `geojson` a footprint file (relative to the mission file; `FILE` or `{file, strict, crs,
-height_key, bbox}`) read by `gcs.footprints`: Polygon and MultiPolygon features become solid
-polygons (holes ignored: a courtyard is not flyable), LineString and MultiLineString features
-walls; what was skipped, repaired, dropped or left out below the flight is in
-`Mission.footprints` and one warning line per file (logger `gcs.footprints`).
+"""The mission file parser: YAML -> `Mission`, every refusal one `InputError`
+(docs/mission-file.md; the package docstring lists the defaults).
 """
 
 from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -71,7 +15,8 @@ import yaml
 
 from fleetwire.files import MISSION_BYTES, FileRefused, check_nesting, read_bounded
 from gcs.errors import InputError, join_key
-from gcs.footprints import (
+from gcs.geodesy import Origin, geodetic_to_enu
+from gcs.mission.footprints import (
     MAX_FOOTPRINT_DISTANCE_M,  # also re-exported
     FootprintError,
     FootprintOptions,
@@ -79,267 +24,39 @@ from gcs.footprints import (
     Footprints,
     read_footprints,
 )
-from gcs.footprints import log as footprint_log
-from gcs.geodesy import Origin, geodetic_to_enu
+from gcs.mission.footprints import log as footprint_log
+from gcs.mission.model import (
+    _NAME,
+    BACKENDS,
+    BUILDING_MODELS,
+    CONNECTIVITY_RULES,
+    DEFAULT_ORIGIN,
+    DEFAULT_TRACKING_FRACTION,
+    MAX_FLEET_SIZE,
+    MAX_METRES,
+    MAX_SEED,
+    PARKING,
+    RADIO_MODELS,
+    STATION_ORDERS,
+    VERSION,
+    Fleet,
+    GroundUser,
+    Mission,
+    Point,
+    Pose,
+    Radio,
+    ScheduledChange,
+    Signing,
+    Sim,
+    SimNoise,
+    SpeedSchedule,
+    Station,
+    Vehicle,
+)
 from medium.pathloss import FREQUENCY_RANGE_GHZ
 from planner.formation import DISTANCE_TOLERANCE, min_radio_range
 from planner.numbers import fmt_against
 from planner.obstacles import Obstacles
-
-#: The only mission file version this code reads.
-VERSION = 1
-#: ArduPilot SITL's default home, the documented default origin.
-DEFAULT_ORIGIN = Origin(lat=-35.363262, lon=149.165237, alt=584.0)
-#: Fraction of the safety margin reserved for tracking error and noise by default.
-DEFAULT_TRACKING_FRACTION = 0.3
-#: Footprints further than this from the origin are refused (a wrong origin, most likely):
-#: `gcs.footprints.MAX_FOOTPRINT_DISTANCE_M`, imported above.
-BACKENDS = ("sim", "ardupilot", "px4")
-PARKING = ("segment", "ray")
-#: `connectivity.rule`: the paper's disk (within radio_range), or also a chord clear of the
-#: buildings (line of sight, docs/line-of-sight.md).
-CONNECTIVITY_RULES = ("disk", "line_of_sight")
-#: `radio.buildings`: links through buildings follow 3GPP TR 38.901 UMi-Street Canyon's NLOS
-#: path loss (`true` means this one), or are all cut (the bound the planner's line-of-sight
-#: rule assumes); docs/line-of-sight.md.
-BUILDING_MODELS = ("3gpp-umi", "cut")
-#: `stations.order`: `tsp` (the planner picks the shortest tour) or `given` (as written).
-STATION_ORDERS = ("tsp", "given")
-_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")
-
-
-#: Largest magnitude of a length in metres (coordinates, margins, ranges): 1,000 km, well past
-#: any local frame a fleet flies in; beyond it floats lose the centimetre.
-MAX_METRES = 1e6
-#: UAVs one ground station can fly: MAVLink system ids 1-254 (255 is the ground station's,
-#: `fleetwire.messages.GCS_SYSTEM_ID`; fleetwire is not imported here: planning stays light).
-MAX_FLEET_SIZE = 254
-#: Largest `sim.seed`: the vehicles' and the medium's seeds are 63-bit.
-MAX_SEED = 2**63 - 1
-
-
-@dataclass(frozen=True)
-class Pose:
-    """A (departure or arrival) point and the angle of its parking row vs A->B, degrees."""
-
-    x: float
-    y: float
-    theta_deg: float = 0.0
-
-    @property
-    def xy(self) -> np.ndarray:
-        return np.array([self.x, self.y])
-
-
-@dataclass(frozen=True)
-class Point:
-    """A point of the local frame (a base station), metres."""
-
-    x: float
-    y: float
-
-    @property
-    def xy(self) -> np.ndarray:
-        return np.array([self.x, self.y])
-
-
-@dataclass(frozen=True)
-class Station:
-    """A monitoring station (use case 1): a point a UAV holds, metres in the local frame.
-
-    `dwell_s` is how long the point should be held (informative, seconds, default 0)."""
-
-    name: str
-    x: float
-    y: float
-    dwell_s: float = 0.0
-
-    @property
-    def xy(self) -> np.ndarray:
-        return np.array([self.x, self.y])
-
-
-@dataclass(frozen=True)
-class ScheduledChange:
-    """A speed change of the mission file's schedule: effective time `at` (s), new speed (m/s),
-    optional leader.
-
-    With a `leader` (1-based UAV number) `at` is when that UAV sends the request.
-    """
-
-    at: float
-    speed: float
-    leader: int | None = None
-
-
-@dataclass(frozen=True)
-class SpeedSchedule:
-    """v_max, v(0) and the scheduled changes (eq. 6, sec. III-B)."""
-
-    max: float
-    initial: float
-    changes: tuple[ScheduledChange, ...] = ()
-    cap_to_safe: bool = False
-
-
-@dataclass(frozen=True)
-class Fleet:
-    """Fleet size (None = `auto`, the minimum of eq. 28), backend and MAVLink connections."""
-
-    size: int | None = None
-    backend: str = "sim"
-    connections: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True)
-class Vehicle:
-    """What the GCS assumes of each airframe (and the simulator simulates)."""
-
-    max_speed: float = 15.0
-    max_acceleration: float = 6.0
-    radius: float = 0.5
-    tracking_allowance: float = 0.0  # metres; resolved from the safety margin when absent
-    #: Set each autopilot's own limits (its parameters) to max_speed / max_acceleration for
-    #: the flight when they are lower, and put them back after landing.
-    apply_limits: bool = False
-
-
-@dataclass(frozen=True)
-class GroundUser:
-    """A data source on the ground (x, y in metres, rate in bit/s)."""
-
-    x: float
-    y: float
-    rate_bps: float = 800.0
-
-
-@dataclass(frozen=True)
-class SimNoise:
-    """Wind and navigation noise of the simulated vehicles (see the module docstring)."""
-
-    wind_mean_mps: float = 0.0
-    wind_direction_deg: float = 0.0
-    wind_gust_mps: float = 0.5
-    wind_time_s: float = 5.0
-    position_m: float = 0.1
-
-
-@dataclass(frozen=True)
-class Sim:
-    """Simulated backend: setpoint rate, random seed, noise, battery capacity (mAh: one for
-    every UAV, one per UAV, or None for the simulated airframe's)."""
-
-    setpoint_rate_hz: float = 10.0
-    seed: int = 1
-    noise: SimNoise = field(default_factory=SimNoise)
-    battery_mah: float | tuple[float, ...] | None = None
-
-    def battery_capacities(self, count: int) -> tuple[float, ...] | None:
-        """`battery_mah` for `count` UAVs, one number each (None: the airframe's);
-        ValueError if it is a list of another length."""
-        if self.battery_mah is None:
-            return None
-        if isinstance(self.battery_mah, tuple):
-            if len(self.battery_mah) != count:
-                raise ValueError(
-                    f"sim.battery_mah has {len(self.battery_mah)} numbers for {count} UAVs"
-                )
-            return self.battery_mah
-        return (self.battery_mah,) * count
-
-
-#: `radio.model`: the medium's per-hop latency, jitter and loss, or draws from a table
-#: measured in ns-3 (`medium.radio`, docs/calibration.md).
-RADIO_MODELS = ("simple", "calibrated")
-
-
-@dataclass(frozen=True)
-class Radio:
-    """Emulated radio medium of the sim backend (range is the mission's `radio_range`).
-    `model` "calibrated" draws each packet's delay and loss from `calibration` (absolute,
-    resolved from the mission file; None: the table the medium ships)."""
-
-    enabled: bool = True
-    hop_latency_ms: float = 2.0
-    jitter_ms: float = 1.0
-    loss: float = 0.0
-    model: str = "simple"
-    calibration: Path | None = None
-    #: links whose chord meets an obstacle: None, as if there were none (the paper's disk);
-    #: a model of `BUILDING_MODELS` (docs/line-of-sight.md)
-    buildings: str | None = None
-    #: carrier frequency (GHz) of the path-loss model of `buildings`
-    frequency_ghz: float = 2.4
-
-
-@dataclass(frozen=True)
-class Signing:
-    """MAVLink 2 signing: key file (absolute, resolved from the mission file), or None."""
-
-    key_file: Path | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class Mission:
-    """A validated mission. `obstacle_keys[i]` is the key path of `obstacles.geometries[i]`.
-
-    `goal` is None only in a stations mission without `goal` (`stations` non-empty)."""
-
-    source: Path
-    text: str
-    version: int
-    name: str
-    origin: Origin
-    start: Pose
-    goal: Pose | None
-    safety_margin: float
-    radio_range: float
-    altitude: float
-    parking: str
-    speed: SpeedSchedule
-    fleet: Fleet
-    vehicle: Vehicle
-    base_stations: tuple[Point, ...]
-    obstacles: Obstacles
-    obstacle_keys: tuple[str, ...]
-    ground_users: tuple[GroundUser, ...]
-    sim: Sim
-    radio: Radio
-    signing: Signing
-    #: One report per footprint file (`obstacles[i].geojson`), in obstacle order.
-    footprints: tuple[FootprintReport, ...] = ()
-    #: Monitoring stations (use case 1), in the order written; empty for an A->B mission.
-    stations: tuple[Station, ...] = ()
-    #: `stations.order`: `tsp` or `given`.
-    station_order: str = "tsp"
-    #: `return.at`: mission time (s) at which the fleet flies home; None = on command.
-    return_at: float | None = None
-    #: `stations.relieve_below_pct`: a UAV on station whose battery (%) is below it is
-    #: relieved; None = never for its battery.
-    relieve_below_pct: float | None = None
-    #: `connectivity.rule`: `disk` or `line_of_sight` (CONNECTIVITY_RULES).
-    connectivity_rule: str = "disk"
-
-    @property
-    def base_station_points(self) -> np.ndarray:
-        """(k, 2) float: A, then B when the mission has one, then every `base_stations` point."""
-        points = [self.start.xy]
-        if self.goal is not None:
-            points.append(self.goal.xy)
-        points.extend(b.xy for b in self.base_stations)
-        return np.array(points, float).reshape(-1, 2)
-
-    @property
-    def base_station_names(self) -> tuple[str, ...]:
-        """Names of `base_station_points`: A, B (when the mission has one), BS1, BS2, ..."""
-        ends = ("A",) if self.goal is None else ("A", "B")
-        return ends + tuple(f"BS{k + 1}" for k in range(len(self.base_stations)))
-
-    @property
-    def error_budget(self) -> float:
-        """Smoothing error allowed at bends: rho_c minus the tracking allowance
-        (docs/design.md 3.5)."""
-        return self.safety_margin - self.vehicle.tracking_allowance
 
 
 def load_mission(path: str | Path, *, check_clearance: bool = True) -> Mission:
@@ -1158,7 +875,7 @@ class MissionParser:
         self, value: Any, path: str, origin: Origin, height_limit: float | None = None
     ) -> Footprints:
         """A footprint file item (`FILE` or `{file, strict, crs, height_key, bbox}`) ->
-        `gcs.footprints.Footprints` (labelled local rings and walls, and the report)."""
+        `gcs.mission.footprints.Footprints` (labelled local rings and walls, and the report)."""
         if isinstance(value, dict):
             keys = ("file", "strict", "crs", "height_key", "bbox")
             m = self.mapping(value, path, keys, ("file",))

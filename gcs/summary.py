@@ -15,7 +15,7 @@ Run JSON fields (docs/outputs.md), all times in mission seconds:
 Extra fields: `reason` (when not completed), `exit_status`, `per_uav` (tracking, control and
 landing errors, final phase), `budget` (smoothing window and bound, worst control error,
 navigation noise, against rho_c), `setpoints` (sent, achieved rate, p99 period jitter), `events`
-(the monitors' errors and warnings), `radio` (when the radio medium ran: `gcs.sim.radio`),
+(the monitors' errors and warnings), `radio` (when the radio medium ran: `gcs.sim.medium_process`),
 `stations` (a stations mission: each point's holder and time on station, when the return
 started, the connectivity while everyone held; docs/outputs.md).
 """

@@ -29,7 +29,7 @@ from gcs.netsim.calibrate import (
 from gcs.netsim.ns3 import NetOptions
 from gcs.planning import plan_mission
 from gcs.sim.fastsim import FastOptions, fly_fast, radio_config
-from gcs.sim.radio import medium_setup, model_args
+from gcs.sim.medium_process import medium_setup, model_args
 from medium import cli as medium_cli
 from medium.calibration import (
     DEFAULT_CALIBRATION,

@@ -202,7 +202,7 @@ def run_command(args: argparse.Namespace) -> int:  # noqa: C901 (over 15 branche
     from gcs.flight.core import GroundStation, RunOptions
     from gcs.flight.live import LiveLoop
     from gcs.recording.recording import FlightRecorder, LiveServerError
-    from gcs.sim.radio import medium_setup
+    from gcs.sim.medium_process import medium_setup
     from gcs.speed import OperatorSocket, socket_path_for
     from gcs.summary import EXIT_ABORTED, exit_status, run_json, summary_renderable
     from gcs.transport.forward import Forwarder

@@ -28,7 +28,7 @@ from fleetwire.worldclock import WorldClockMaster
 from gcs.drivers.base import CommandSpec, Driver, Fleet, FleetProblem, FlightMode
 from gcs.geodesy import Origin
 from gcs.sim.children import start_child
-from gcs.sim.radio import MediumProcess, MediumSetup
+from gcs.sim.medium_process import MediumProcess, MediumSetup
 from gcs.transport.link import mavutil
 from vehicles.ports import free_udp_ports
 
@@ -125,7 +125,9 @@ class SimVehicleSetup:
     leaders: dict[int, list[tuple[float, float]]] = field(default_factory=dict)
     extra_args: tuple[str, ...] = ()
     log_dir: Path | None = None  # where each process's stderr goes (None: discarded)
-    radio: MediumSetup | None = None  # links through the radio medium (gcs.sim.radio); None: direct
+    radio: MediumSetup | None = (
+        None  # links through the radio medium (gcs.sim.medium_process); None: direct
+    )
     #: lockstep: the vehicles and the medium take their time from the ground station's mission
     #: clock (fleetwire.worldclock) when the speed-up is above 1; False: the wall clock
     lockstep: bool = True

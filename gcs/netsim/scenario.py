@@ -219,7 +219,7 @@ def scenario_from_fast_run(run, mission) -> NetScenario:
 
 def _buildings(mission) -> dict:
     """The scenario's `buildings` and `nlos_range_m` under the mission's `radio.buildings`."""
-    from gcs.sim.radio import nlos_range
+    from gcs.sim.medium_process import nlos_range
     from planner.sight import sight_json
 
     if mission is None or not mission.radio.buildings:

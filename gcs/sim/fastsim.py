@@ -35,7 +35,7 @@ from gcs.flight.clock import MissionClock
 from gcs.flight.core import GroundStation, NullRecorder, RunOptions, RunResult
 from gcs.flight.records import run_json_radio
 from gcs.planning import MissionPlan, plan_json
-from gcs.sim.radio import buildings_sight
+from gcs.sim.medium_process import buildings_sight
 from gcs.summary import run_json
 from gcs.transport.link import MemoryLink
 from medium.ground_users import DEFAULT_PACKET_BYTES, GroundUser

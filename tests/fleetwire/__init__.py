@@ -1,1 +1,0 @@
-"""The shared wire's tests (signing clocks, geodesy, the world clock)."""

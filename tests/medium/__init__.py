@@ -1,1 +1,0 @@
-"""The radio medium's tests."""

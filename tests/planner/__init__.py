@@ -1,1 +1,0 @@
-"""The planner's tests: pure, numbers in and out."""

@@ -297,9 +297,9 @@ def test_a_killed_ground_station_leaves_uavs_that_hold_land_and_exit(tmp_path: P
     reason=(
         "known breach, 2 of about 8 CI runs at stops 39-40 (5.43 m, 5.02 m): with 30 % loss a "
         "UAV's tracking error grows past rho_c within the half window the hold needs to stop the "
-        "reference (3.82 m at the hold, 5.02 m 0.5 s later), and the late-take-off freeze flaps "
-        "(a freeze makes the late UAV's departure infinite, so it is no longer late: resume, "
-        "freeze again every tick); closing note of stop 40. Remove when fixed."
+        "reference (3.82 m at the hold, 5.02 m 0.5 s later); the late-take-off freeze that "
+        "flapped before it (resume, freeze again every tick) is fixed; the hold's reach is not "
+        "(closing note of stop 40). Remove when fixed."
     ),
 )
 def test_with_30_percent_loss_and_reordering_the_mission_completes_within_rho_c(tmp_path: Path):

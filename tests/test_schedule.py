@@ -22,7 +22,10 @@ def uav(**changes) -> UavProgress:
     return UavProgress(**fields)
 
 
-def decide(t, uavs, departures, arrivals=None, offsets=None, lands=True, horizon=None):
+def decide(
+    t, uavs, departures, arrivals=None, offsets=None, lands=True, horizon=None,
+    frozen_for=frozenset(),
+):  # fmt: skip
     count = len(uavs)
     arrivals = np.full(count, math.inf) if arrivals is None else np.asarray(arrivals, float)
     offsets = np.zeros(count) if offsets is None else np.asarray(offsets, float)
@@ -34,7 +37,7 @@ def decide(t, uavs, departures, arrivals=None, offsets=None, lands=True, horizon
 
     decision = SCHEDULE.decide(
         t, uavs, np.asarray(departures, float), arrivals,
-        t + 1.0 if horizon is None else horizon, WINDOW, lands, offset,
+        t + 1.0 if horizon is None else horizon, WINDOW, lands, offset, frozen_for,
     )  # fmt: skip
     return decision, asked
 
@@ -73,3 +76,16 @@ def test_a_relieved_uav_flies_its_own_schedule():
     fleet = [uav(relieved=True, not_up=True), uav(not_up=True)]
     decision, _ = decide(50.0, fleet, [50.0, 50.0])
     assert decision.takeoff == (1,) and decision.late == (2,)
+
+
+def test_a_uav_the_formation_froze_for_stays_late_until_it_is_up():
+    """Frozen, the late UAV's departure reads inf (the profile stands still): it is still late,
+    so the formation does not resume and freeze again every tick; once up, it is not."""
+    frozen = [uav(following=True), uav(not_up=True)]
+    decision, _ = decide(40.0, frozen, [0.0, math.inf], frozen_for=frozenset({1}))
+    assert decision.late == (2,)
+    up = [uav(following=True), uav(following=True, takeoff_sent=True)]
+    decision, _ = decide(41.0, up, [0.0, math.inf], frozen_for=frozenset({1}))
+    assert decision.late == ()
+    unfrozen, _ = decide(40.0, frozen, [0.0, math.inf])
+    assert unfrozen.late == ()  # without the freeze, an unreached departure is not late

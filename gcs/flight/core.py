@@ -423,6 +423,7 @@ class GroundStation:
         self.frozen_by: str | None = None  # "link" | "operator" | "takeoff" | None
         self._resume_speed: float | None = None
         self.rejoin = RejoinPolicy(options.link_wait_s, options.interactive)
+        self._takeoff_waits: frozenset[int] = frozenset()  # UAVs late to take off (indices)
         self.interrupts = 0
         self._handled_interrupts = 0
         self._samples: list[tuple[int, float, np.ndarray, bool]] = []  # uav, t, xyz, true?
@@ -1488,6 +1489,7 @@ class GroundStation:
             decision = schedule.decide(
                 t, uavs, departures, arrivals, horizon, self.window_s, lands,
                 lambda index: self._slot_offset(index, t),
+                frozen_for=self._takeoff_waits if self.frozen_by == "takeoff" else frozenset(),
             )  # fmt: skip
         stay, takeoff, land = set(decision.stay), set(decision.takeoff), set(decision.land)
         for index, driver in enumerate(self.drivers):  # per UAV, in the order of its actions
@@ -1511,6 +1513,7 @@ class GroundStation:
                 track.land_sent = True
                 driver.land(now)
         late = list(decision.late)
+        self._takeoff_waits = frozenset(uav - 1 for uav in late)
         if late and self.frozen_by is None:
             self._event(
                 MonitorEvent(

@@ -4,7 +4,12 @@ over loopback UDP, one fault per flight, on the wall clock (`--no-lockstep`, as 
 autopilots) unless said. Columns: the outcome (exit status, completed or the reason), the
 largest tracking error, where the UAVs ended (landed, and how far from their goal slots at
 most), and the state of the log. A last row flips one byte of a recording and asks
-`gcs log info`."""
+`gcs log info`.
+
+A second table flies the same mission in the fast mode over a lossy network, every packet
+each way lost with a probability (`Faults.link_loss`), one flight per seed: how many complete
+within rho_c, the worst tracking error the ground station measured and the true one, and the
+holds."""
 
 from __future__ import annotations
 
@@ -20,7 +25,16 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from tests.flying import Flight, children_running, environment, mission_file, udp_ports
+from tests.flying import (
+    MISSION,
+    Flight,
+    children_running,
+    environment,
+    mission_file,
+    udp_ports,
+)
+
+LOSSY_SEEDS = {0.3: 40, 0.4: 20}  # loss probability -> seeds flown
 
 FOLLOWING = "UAV 4: taking_off -> following"
 
@@ -125,6 +139,38 @@ def flipped_byte(recording: Path) -> list[str]:
     return ["one byte flipped in a recording", str(info.returncode), said, "-", "-", "-"]
 
 
+def lossy(seeds: dict[float, int] = LOSSY_SEEDS) -> Table:
+    """The fast mode over a lossy network (see the module docstring)."""
+    import numpy as np
+
+    from gcs.mission import load_mission
+    from gcs.planning import plan_mission
+    from gcs.sim.fastsim import FastOptions, Faults, fly_fast
+
+    plan = plan_mission(load_mission(MISSION))
+    rho_c = plan.mission.safety_margin
+    table = Table(title="the small mission over a lossy network (fast mode, one flight per seed)")
+    for name in ("loss each way", "flights", "completed within rho_c", "worst measured m",
+                 "worst true m", "true >= rho_c", "flights that held", "holds"):  # fmt: skip
+        table.add_column(name)
+    for loss, count in seeds.items():
+        measured, true, held, holds, ok = [], [], 0, 0, 0
+        for seed in range(count):
+            run = fly_fast(plan, FastOptions(faults=Faults(link_loss=loss, link_loss_seed=seed)))
+            result = run.run_json
+            worst = float(np.nanmax(run.tracking_error_m))
+            measured.append(result["max_tracking_error_m"])
+            true.append(worst)
+            held += bool(result["holds"])
+            holds += len(result["holds"])
+            ok += bool(result["completed"]) and worst < rho_c
+        table.add_row(
+            f"{loss:.0%}", str(count), str(ok), f"{max(measured):.2f}", f"{max(true):.2f}",
+            str(sum(t >= rho_c for t in true)), str(held), str(holds),
+        )  # fmt: skip
+    return table
+
+
 def main(cases=CASES) -> None:
     table = Table(title="faults on the small mission (rho_c 5 m)")
     for name in ("fault", "exit", "outcome", "max tracking m", "UAVs", "log"):
@@ -139,6 +185,7 @@ def main(cases=CASES) -> None:
         if kept is not None:
             table.add_row(*flipped_byte(kept))
     Console(width=220).print(table)
+    Console(width=220).print(lossy())
 
 
 if __name__ == "__main__":

@@ -159,6 +159,11 @@ def test_connect_takeoff_speed_change_leader_and_land():
         for driver in drivers:
             driver.land(now)
         assert all(d.phase == Phase.LANDING for d in drivers)
+        # until a heartbeat shows LAND, a vehicle that missed the request still flies guided:
+        # the stream goes on (the one it carries on may be braking); it stops once LAND shows
+        assert all(d.wants_setpoints for d in drivers)
+        pump(drivers, lambda: all(d.mode_goal is None for d in drivers), 10)
+        assert not any(d.wants_setpoints for d in drivers)
         pump(drivers, lambda: all(d.phase == Phase.LANDED for d in drivers), 30)
         assert not any(d.telemetry.armed for d in drivers)
         texts = [text for d in drivers for _, _, text in d.statustexts]

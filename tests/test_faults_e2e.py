@@ -292,16 +292,6 @@ def test_a_killed_ground_station_leaves_uavs_that_hold_land_and_exit(tmp_path: P
 
 
 # --------------------------------------------------------------------------- a lossy network
-@pytest.mark.xfail(
-    strict=False,
-    reason=(
-        "known breach, 2 of about 8 CI runs at stops 39-40 (5.43 m, 5.02 m): with 30 % loss a "
-        "UAV's tracking error grows past rho_c within the half window the hold needs to stop the "
-        "reference (3.82 m at the hold, 5.02 m 0.5 s later); the late-take-off freeze that "
-        "flapped before it (resume, freeze again every tick) is fixed; the hold's reach is not "
-        "(closing note of stop 40). Remove when fixed."
-    ),
-)
 def test_with_30_percent_loss_and_reordering_the_mission_completes_within_rho_c(tmp_path: Path):
     speedup = flight_speedup(5)
     mission = mission_file(tmp_path, signing={"key_file": "fleet.key"})

@@ -49,21 +49,25 @@ def assert_stood_still_while_holding(run) -> None:
 
 
 # ------------------------------------------------------------------ the policy alone
-def state(index=0, following=True, error=0.5, sample_time=10.0) -> UavState:
-    return UavState(index, following, error, sample_time)
+def state(index=0, following=True, error=0.5, sample_time=10.0, growth=0.0) -> UavState:
+    return UavState(index, following, error, sample_time, growth)
 
 
 def test_the_thresholds_come_from_the_error_budget():
-    policy = HoldPolicy.for_budget(safety_margin=5.0, tracking_allowance=1.5, give_up_s=10.0)
+    policy = HoldPolicy.for_budget(
+        safety_margin=5.0, tracking_allowance=1.5, give_up_s=10.0, max_acceleration=8.0
+    )
     assert policy.hold_threshold_m == pytest.approx(3.5)  # rho_c less the allowance
     assert policy.resume_m == pytest.approx(1.5)  # back within the allowance
     # an allowance of most of the margin still leaves half of it before holding
-    wide = HoldPolicy.for_budget(safety_margin=5.0, tracking_allowance=4.0, give_up_s=10.0)
+    wide = HoldPolicy.for_budget(
+        safety_margin=5.0, tracking_allowance=4.0, give_up_s=10.0, max_acceleration=8.0
+    )
     assert wide.hold_threshold_m == pytest.approx(2.5) and wide.resume_m == pytest.approx(2.5)
 
 
 def test_a_uav_is_behind_by_its_tracking_error_or_its_telemetry_lag():
-    policy = HoldPolicy.for_budget(5.0, 1.5, 10.0)
+    policy = HoldPolicy.for_budget(5.0, 1.5, 10.0, 8.0)
     t = 10.0
     assert policy.behind(t, [state(error=3.49)]) == []
     ((uav, why),) = policy.behind(t, [state(index=1, error=3.5)])
@@ -75,8 +79,28 @@ def test_a_uav_is_behind_by_its_tracking_error_or_its_telemetry_lag():
     assert policy.behind(t, [state(following=False, error=20.0, sample_time=0.0)]) == []
 
 
+def test_a_uav_is_behind_when_its_growing_error_will_reach_the_threshold_before_it_closes():
+    """An error of 2 m growing 5.5 m/s reaches 2 + 5.5^2 / 16 = 3.89 m before a UAV
+    accelerating at 8 m/s^2 matches its target's speed: behind now, not 0.3 s later. A closing
+    error, or one growing slowly, is not."""
+    policy = HoldPolicy.for_budget(5.0, 1.5, 10.0, 8.0)
+    t = 10.0
+    ((uav, why),) = policy.behind(t, [state(error=2.0, growth=5.5)])
+    assert uav == 1 and "growing 5.5 m/s reaches 3.89 m" in why
+    assert policy.reach_m(t, state(error=2.0, growth=5.5)) == pytest.approx(2.0 + 5.5**2 / 16)
+    assert policy.behind(t, [state(error=2.0, growth=4.8)]) == []  # reaches 3.44 m
+    # the same sample 0.2 s old: the error grew meanwhile (samples lost on the way)
+    ((_, why),) = policy.behind(t, [state(error=2.0, growth=4.8, sample_time=t - 0.2)])
+    assert "reaches 4.40 m" in why
+    assert policy.behind(t, [state(error=3.4, growth=-6.0)]) == []  # closing
+    # a UAV drifting away is not back, however close it is now
+    policy.start(10.0, stop_s=10.5, standing_s=11.0, reasons=[(1, "x")])
+    assert not policy.back(11.0, [state(error=0.5, sample_time=11.0, growth=5.0)])  # 2.06 m
+    assert policy.back(11.0, [state(error=0.5, sample_time=11.0, growth=-4.0)])
+
+
 def test_a_hold_resumes_only_once_standing_and_everyone_is_back():
-    policy = HoldPolicy.for_budget(5.0, 1.5, 10.0)
+    policy = HoldPolicy.for_budget(5.0, 1.5, 10.0, 8.0)
     policy.start(10.0, stop_s=10.5, standing_s=11.0, reasons=[(1, "x")])
     close = [state(error=0.2, sample_time=10.9)]
     assert not policy.back(10.9, close)  # the reference still moves: judged where it stops
@@ -89,7 +113,7 @@ def test_a_hold_resumes_only_once_standing_and_everyone_is_back():
 def test_stop_and_go_counts_as_one_hold_towards_giving_up():
     """Holds within give_up_s of each other add their held seconds; the flight between them
     does not count (two faults 6 s apart once landed a fleet that had held 3.7 s)."""
-    policy = HoldPolicy.for_budget(5.0, 1.5, give_up_s=10.0)
+    policy = HoldPolicy.for_budget(5.0, 1.5, give_up_s=10.0, max_acceleration=8.0)
     policy.start(10.0, 10.5, 11.0, [(1, "x")])
     assert not policy.overdue(19.9) and policy.overdue(20.0)
     policy.end(12.0, "resumed")  # held 2 s

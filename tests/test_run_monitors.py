@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fleetwire.messages import clock_slipped_text, parse_clock_slipped
+from gcs.drivers.base import VEHICLE_REBOOT_JUMP_S
 from gcs.flight.clock import MissionClock, VehicleClock
 from gcs.monitors import NEAR_HYSTERESIS_M, LinkMonitor, SafetyMonitor
 from planner.obstacles import Obstacles
@@ -117,7 +118,7 @@ def test_mission_clock_speedup_and_log_time():
 def test_vehicle_clock_recovers_sample_times_from_delayed_receipts(offset, delays):
     """Samples every 0.1 s of vehicle time, received late by `delays`: the mapped times are
     never later than the true ones by more than the smallest delay seen so far."""
-    clock = VehicleClock(window=100)
+    clock = VehicleClock(VEHICLE_REBOOT_JUMP_S, window=100)
     smallest = float("inf")
     for k, delay in enumerate(delays):
         vehicle = 0.1 * k
@@ -160,7 +161,7 @@ def test_a_sample_taken_while_the_mission_paused_maps_to_the_pause():
     stalls from mission time 10 s for 2.5 s, the vehicles fly 1 s of it: the mission pauses at
     11 s for 1.5 s. Samples before the pause keep their time, those taken while the mission
     stood still map to the pause, later ones are 1.5 s earlier than before."""
-    clock = VehicleClock()
+    clock = VehicleClock(VEHICLE_REBOOT_JUMP_S)
     offset, delay = 100.0, 0.02  # mission time = vehicle time + offset, until the stall
     for k in range(101):  # vehicle time 0 .. 10 s, read as they come
         vehicle = 0.1 * k
@@ -181,7 +182,7 @@ def test_a_vehicle_clock_that_slipped_maps_its_samples_to_when_they_were_taken()
     behind the mission clock, as it says (STATUSTEXT). Samples every 0.1 s, received 20 ms
     after they were taken, keep mapping to when they were taken, not 1.02 s early for the
     rest of the window (5 s of samples) as the minimum offset alone would."""
-    clock = VehicleClock()
+    clock = VehicleClock(VEHICLE_REBOOT_JUMP_S)
     offset, delay, slip = 100.0, 0.02, 1.02
     for k in range(60):
         clock.mission_time(0.1 * k, offset + 0.1 * k + delay)
@@ -196,3 +197,20 @@ def test_only_a_clock_slip_report_moves_the_vehicle_clock():
     assert parse_clock_slipped(clock_slipped_text(0.25)) == pytest.approx(0.25)
     for text in ("Sim: clock slipped nan s", "Sim: clock slipped -1 s", "Guided: no setpoint"):
         assert parse_clock_slipped(text) is None
+
+
+def test_a_sample_overtaken_on_the_way_keeps_the_vehicle_clock_a_reboot_restarts_it():
+    """A network that reorders datagrams hands over a sample a little older than the latest:
+    it maps like any other and the offset estimate is kept (it used to restart as after a
+    reboot, mapping the next samples by one delayed receipt). A clock that jumps back by more
+    than `VEHICLE_REBOOT_JUMP_S` is a reboot: the estimate starts over."""
+    clock = VehicleClock(VEHICLE_REBOOT_JUMP_S)
+    offset = 100.0
+    for k in range(30):  # 0.1 s apart, received 20 ms late; the least delayed bound is kept
+        clock.mission_time(0.1 * k, offset + 0.1 * k + (0.02 if k else 0.0))
+    overtaken = clock.mission_time(2.85, offset + 2.95)  # taken before the last, read late
+    assert overtaken == pytest.approx(offset + 2.85)
+    after = clock.mission_time(3.0, offset + 3.3)  # a late receipt: mapped by the old bound
+    assert after == pytest.approx(offset + 3.0)
+    rebooted = clock.mission_time(0.5, offset + 10.0)  # back 2.5 s: a reboot
+    assert rebooted == pytest.approx(offset + 10.0)

@@ -170,6 +170,10 @@ GUIDED_PHASES = frozenset({Phase.TAKING_OFF, Phase.FOLLOWING})
 #: Take-offs armed again when the autopilot disarms on the ground before the climb.
 MAX_TAKEOFF_REARMS = 3
 
+#: Vehicle seconds the vehicle's clock (time_boot_ms) may step back before it counts as a
+#: reboot; a smaller step is a datagram overtaken on the way (a network reordering them).
+VEHICLE_REBOOT_JUMP_S = 2.0
+
 #: Phases in which the vehicle is (or may be) in the air.
 AIRBORNE_PHASES = frozenset({Phase.TAKING_OFF, Phase.FOLLOWING, Phase.HOLDING, Phase.LANDING})
 
@@ -260,11 +264,17 @@ class Telemetry:
     true_position_enu: np.ndarray | None = None
     true_velocity_enu: np.ndarray | None = None
     true_time: float | None = None
-    # The vehicle's own clock (time_boot_ms of its last message that has one), seconds; a
-    # sample's time on it does not suffer from the ground station's receive delays.
+    # The vehicle's own clock (the latest time_boot_ms heard, seconds; a datagram overtaken by
+    # a later one does not move it back, a reboot does) and when it was heard (receiver clock);
+    # a sample's time on it does not suffer from the ground station's receive delays.
     vehicle_time_s: float | None = None
-    position_vehicle_time_s: float | None = None
+    vehicle_time_heard: float | None = None
+    position_vehicle_time_s: float | None = None  # GLOBAL_POSITION_INT's own time_boot_ms
+    # SIM_STATE carries no time: the vehicle time heard before it, and when that was heard (a
+    # sample whose own tick's timed messages were lost is later than that time: the consumer
+    # adds the receiver time between the two, `Driver.true_sample_vehicle_time`)
     true_vehicle_time_s: float | None = None
+    true_vehicle_time_heard: float | None = None
     navigation_noise_m: float | None = None  # the simulator's navigation noise (1 sigma)
 
 
@@ -586,6 +596,12 @@ class Driver(ABC):
         """Whether the scheduler should stream setpoints to this UAV now."""
         if self.phase == Phase.FOLLOWING:
             return True
+        if self.phase == Phase.LANDING:
+            # until a heartbeat shows LAND the vehicle may still fly guided (the request, or
+            # its ack, lost): it follows the stream, not the feed-forward of the last setpoint
+            # it heard carried on (a braking one flies it back along the path: 10.3 m with 40 %
+            # of packets lost); the autopilot ignores setpoints once it lands
+            return self._mode_goal == FlightMode.LAND and self.current_mode() == FlightMode.GUIDED
         if self.phase in (Phase.ARMING, Phase.TAKING_OFF):
             return self.needs_setpoint_stream_before_offboard or not self._takes_off_by_command
         return False
@@ -599,12 +615,22 @@ class Driver(ABC):
         kind = msg.get_type()
         boot_ms = getattr(msg, "time_boot_ms", None)
         if boot_ms is not None:
-            self.telemetry.vehicle_time_s = boot_ms / 1000.0
+            self._heard_vehicle_time(boot_ms / 1000.0, now)
         handler = _HANDLERS.get(kind)
         if handler is not None:
             getattr(self, handler)(msg, now)
         else:
             self.on_family_message(msg, now)
+
+    def _heard_vehicle_time(self, vehicle_s: float, now: float) -> None:
+        """The vehicle's clock moves on; a time a little earlier than the latest is a datagram
+        a later one overtook (reordered), not the clock: only a jump back of more than
+        `VEHICLE_REBOOT_JUMP_S` is a reboot, and starts the clock over."""
+        t = self.telemetry
+        latest = t.vehicle_time_s
+        if latest is None or vehicle_s >= latest or latest - vehicle_s > VEHICLE_REBOOT_JUMP_S:
+            t.vehicle_time_s = vehicle_s
+            t.vehicle_time_heard = now
 
     def step(self, now: float) -> None:
         """Advance the state machine: heartbeat, commands in flight, the phase, the mode goal."""
@@ -1134,13 +1160,17 @@ class Driver(ABC):
             self.refuse_position("reported position (GLOBAL_POSITION_INT)", now)
             return
         t = self.telemetry
+        sample_s = msg.time_boot_ms / 1000.0
+        latest = t.position_vehicle_time_s
+        if latest is not None and latest - VEHICLE_REBOOT_JUMP_S <= sample_s < latest:
+            return  # overtaken by a later position on the way: older than the one we have
         t.position_enu = geodetic_point_to_enu(
             msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, self.spec.origin
         )
         t.velocity_enu = np.array([msg.vy, msg.vx, -msg.vz], float) * 0.01
         t.relative_altitude = msg.relative_alt * 1e-3
         t.position_time = now
-        t.position_vehicle_time_s = t.vehicle_time_s
+        t.position_vehicle_time_s = sample_s
 
     def _on_sim_state(self, msg, now: float) -> None:
         """SIM_STATE (simulators): the true position, what the run's metrics measure."""
@@ -1154,7 +1184,8 @@ class Driver(ABC):
         t.true_position_enu = geodetic_point_to_enu(lat, lon, msg.alt, self.spec.origin)
         t.true_velocity_enu = np.array([msg.ve, msg.vn, -msg.vd], float)
         t.true_time = now
-        t.true_vehicle_time_s = t.vehicle_time_s  # SIM_STATE has no time: its tick's
+        t.true_vehicle_time_s = t.vehicle_time_s  # SIM_STATE has no time (see Telemetry)
+        t.true_vehicle_time_heard = t.vehicle_time_heard
         t.navigation_noise_m = float(msg.std_dev_horz)
 
     def _on_home_position(self, msg, now: float) -> None:

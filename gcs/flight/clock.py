@@ -127,7 +127,8 @@ class VehicleClock:
 
     offset = min over recent samples of (mission time at receipt - vehicle time): the least
     delayed sample bounds the offset best. Both clocks run at the same speedup. A vehicle clock
-    that goes backwards (a reboot) starts the estimate over. One that fell behind (a simulator
+    that goes back more than `reboot_jump_s` (a reboot) starts the estimate over; a smaller step
+    back is a sample overtaken on the way (a reordering network), mapped like any other. One that fell behind (a simulator
     that could not keep up and says its clock slipped: `slipped`) moves every offset by the
     slip: without it the minimum keeps the old offset and maps every sample the slip too early
     for a whole window. After the mission clock was held back (`pause`), a sample taken while
@@ -137,7 +138,8 @@ class VehicleClock:
     (steadily larger offsets): only the vehicle can tell, so only its report moves the offsets.
     """
 
-    def __init__(self, window: int = 50) -> None:
+    def __init__(self, reboot_jump_s: float, window: int = 50) -> None:
+        self._reboot_jump_s = reboot_jump_s
         self._offsets: deque[float] = deque(maxlen=window)
         self._last: float | None = None
         self._pause: tuple[float, float] | None = None  # (mission time it paused at, length)
@@ -154,10 +156,11 @@ class VehicleClock:
     def mission_time(self, vehicle_s: float | None, received_s: float) -> float:
         if vehicle_s is None:
             return received_s
-        if self._last is not None and vehicle_s < self._last:
+        if self._last is not None and vehicle_s < self._last - self._reboot_jump_s:
             self._offsets.clear()
             self._pause = None
-        self._last = vehicle_s
+            self._last = None
+        self._last = vehicle_s if self._last is None else max(self._last, vehicle_s)
         self._offsets.append(received_s - vehicle_s)
         mapped = vehicle_s + min(self._offsets)
         if self._pause is not None:

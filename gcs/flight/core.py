@@ -56,13 +56,13 @@ import logging
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
 from fleetline.errors import FleetlineError
 from fleetwire.messages import parse_clock_slipped
-from gcs.drivers.base import Driver, DriverEvent, Phase
+from gcs.drivers.base import VEHICLE_REBOOT_JUMP_S, Driver, DriverEvent, Phase
 from gcs.drivers.limits import LimitExceeded, exceeded
 from gcs.flight.answers import AnswerResult, OperatorAnswer, OperatorCommand
 from gcs.flight.clock import MissionClock, VehicleClock, paused
@@ -335,6 +335,31 @@ class Recorder(Protocol):
     def relief(self, record: ReliefRecord, wall: float) -> None: ...
 
 
+def _error_growth(offsets: np.ndarray, target_velocities: np.ndarray, velocities: np.ndarray):
+    """(S,) how fast the tracking error of each UAV behind its target grows, m/s: the target's
+    velocity relative to the UAV along the UAV's offset from it (`offsets` (S, 2) = UAV -
+    target). 0 where the UAV is not behind (a hold slows the target down: it helps a UAV
+    behind close, and widens the gap of one ahead, such as a UAV that flew its last setpoints
+    on through a stall of the ground station), its velocity is unknown or it sits on its
+    target."""
+    distance = np.hypot(*offsets.T)
+    toward_target = -offsets / np.maximum(distance, 1e-9)[:, None]
+    growth = np.einsum("ij,ij->i", target_velocities - velocities, toward_target)
+    behind = np.einsum("ij,ij->i", target_velocities, toward_target) > 0.0
+    return np.where(np.isfinite(growth) & (distance > 1e-6) & behind, growth, 0.0)
+
+
+class _Sample(NamedTuple):
+    """A position sample received since the last tick: UAV index, mission time taken, xyz,
+    true (SIM_STATE) or reported, horizontal velocity (None: not reported)."""
+
+    uav: int
+    t: float
+    position: np.ndarray
+    truth: bool
+    velocity: np.ndarray | None
+
+
 @dataclass(frozen=True, eq=False)
 class _Evaluation:
     """The formation evaluated once per tick: at the tick (row 0) and at each position sample
@@ -342,7 +367,7 @@ class _Evaluation:
     (1+S,), `distances` S(t) (1+S,), `virtual` V_n(t) (1+S, N, 2), `reference` the smoothed
     reference with its feed-forward."""
 
-    samples: list[tuple[int, float, np.ndarray, bool]]
+    samples: list[_Sample]
     times: np.ndarray
     distances: np.ndarray
     virtual: np.ndarray
@@ -414,7 +439,7 @@ class GroundStation:
         size = self.formation.fleet_size
         self.size = size
         self.tracks = [UavTrack() for _ in range(size)]
-        self._vehicle_clocks = [VehicleClock() for _ in range(size)]
+        self._vehicle_clocks = [VehicleClock(VEHICLE_REBOOT_JUMP_S) for _ in range(size)]
         self.links = LinkMonitor(size, options.link_timeout_s)
         self.events: list[MonitorEvent] = []
         self.fatal = False
@@ -426,7 +451,7 @@ class GroundStation:
         self._takeoff_waits: frozenset[int] = frozenset()  # UAVs late to take off (indices)
         self.interrupts = 0
         self._handled_interrupts = 0
-        self._samples: list[tuple[int, float, np.ndarray, bool]] = []  # uav, t, xyz, true?
+        self._samples: list[_Sample] = []  # received since the last tick
         self._tick_walls: list[float] = []
         self._last_metrics: float | None = None
         self._abort_time: float | None = None
@@ -439,6 +464,7 @@ class GroundStation:
         self._pending_stall: float | None = None  # a stall found by `tick`, resumed by `receive`
         self.stalls: list[Stall] = []
         self.tracking_now = np.full(size, np.nan)
+        self.error_growth_now = np.zeros(size)  # m/s, the tracking error's growth (hold policy)
         self._heard_t = np.full(size, np.nan)  # mission time of each UAV's last valid message
         self.mission_time = None
         # the hold policy (gcs.flight.hold): the formation stops for a UAV that fell behind
@@ -446,6 +472,7 @@ class GroundStation:
             self.mission.safety_margin,
             self.mission.vehicle.tracking_allowance,
             options.link_wait_s,
+            self.mission.vehicle.max_acceleration,
         )
         self._hold_speed = 0.0  # the speed the formation resumes with after the hold
         # stations missions
@@ -900,8 +927,7 @@ class GroundStation:
                 clock.pause(resumed_at, held_back)
             stood = t_now - paused_at  # samples taken while the UAVs stood map to the pause
             self._samples = [
-                (uav, paused(t, paused_at, stood), xyz, truth)
-                for uav, t, xyz, truth in self._samples
+                sample._replace(t=paused(sample.t, paused_at, stood)) for sample in self._samples
             ]
             for track in self.tracks:
                 if track.last_sample_time is not None:
@@ -1540,7 +1566,7 @@ class GroundStation:
         one vectorised evaluation (the profile is final for these instants: a change always
         takes effect later than half the smoothing window ahead)."""
         samples, self._samples = self._samples, []
-        times = np.array([t] + [sample[1] for sample in samples])
+        times = np.array([t] + [sample.t for sample in samples])
         distances = self.profile.distance(times)
         virtual = self.formation.positions(distances)
         reference = smoothed_reference(self.formation, self.profile, times, self.window_s)
@@ -1599,7 +1625,6 @@ class GroundStation:
         idx = np.array(streaming)
         xy = reference.positions[0, idx]
         vxy = reference.velocities[0, idx]
-        axy = reference.accelerations[0, idx]
         count = len(idx)
         vertical = np.zeros((count, 3))  # height above the mission altitude, rate, acceleration
         if self.roster is not None and self.roster.active is not None:
@@ -1612,7 +1637,7 @@ class GroundStation:
         self.current_speed = float(self.profile.speed_at(max(t, 0.0)))  # commanded, for the view
         position = np.column_stack([xy, up])
         velocity = np.column_stack([vxy, vertical[:, 1]])
-        acceleration = np.column_stack([axy, vertical[:, 2]])
+        acceleration = np.column_stack([reference.accelerations[0, idx], vertical[:, 2]])
         # Python lists once per tick: the per-UAV loop below is the hot path.
         positions, velocities = position.tolist(), velocity.tolist()
         accelerations, virtuals, geo = acceleration.tolist(), virtual.tolist(), geodetic.tolist()
@@ -1661,9 +1686,19 @@ class GroundStation:
             # the raw time: while a stall is being resolved the clock stands still, but the
             # samples keep the time they were taken (mapped onto the pause afterwards)
             received = self.clock.raw_mission_time(now)
+            heard = tel.true_vehicle_time_heard if truth else None
+            if vehicle_s is not None and heard is not None:
+                # SIM_STATE has no time of its own: the timed messages of its tick may have
+                # been lost, so it is at least as much later than the last vehicle time heard
+                # as it arrived after it (both clocks run at the speed-up)
+                vehicle_s += max(0.0, received - self.clock.raw_mission_time(heard))
             t = self._vehicle_clocks[index].mission_time(vehicle_s, received)
             track.last_sample_time = t
-            self._samples.append((index, t, position.copy(), truth))
+            self._samples.append(
+                _Sample(
+                    index, t, position.copy(), truth, None if velocity is None else velocity[:2]
+                )
+            )
         else:
             self.recorder.state(
                 UavStateRecord(
@@ -1683,17 +1718,22 @@ class GroundStation:
         events: list[MonitorEvent] = []
         samples = evaluation.samples
         if samples:
-            uavs = np.array([s[0] for s in samples])
+            uavs = np.array([s.uav for s in samples])
             times = evaluation.times[1:]
-            sampled = np.array([s[2] for s in samples])
+            sampled = np.array([s.position for s in samples])
             xy = sampled[:, :2]
-            truths = [s[3] for s in samples]
+            truths = [s.truth for s in samples]
             rows = np.arange(len(uavs))
             virtual = evaluation.virtual[1:][rows, uavs]
             smooth = evaluation.reference.positions[1:][rows, uavs]
             errors = np.hypot(*(xy - virtual).T)
             control = np.hypot(*(xy - smooth).T)
             self.tracking_now[uavs] = errors
+            self.error_growth_now[uavs] = _error_growth(
+                xy - virtual,
+                evaluation.reference.velocities[1:][rows, uavs],
+                np.array([(np.nan, np.nan) if s.velocity is None else s.velocity for s in samples]),
+            )
             if not self.aborting:  # landing where they are: V_n no longer applies
                 events += self.safety.tracking(t, uavs, errors, control)
             for k, index in enumerate(uavs.tolist() if self.recorder.keeps_samples else ()):
@@ -1789,6 +1829,7 @@ class GroundStation:
                 following=driver.phase == Phase.FOLLOWING and not lost[i],
                 tracking_error_m=float(self.tracking_now[i]),
                 sample_time=self.tracks[i].last_sample_time,
+                error_growth_mps=float(self.error_growth_now[i]),
             )
             for i, driver in enumerate(self.drivers)
         ]

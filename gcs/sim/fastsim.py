@@ -92,6 +92,11 @@ class Faults:
     typed: tuple[tuple[float, str], ...] = ()
     #: when the operator presses Ctrl-C
     interrupts: tuple[float, ...] = ()
+    #: the probability that a packet between the ground station and a UAV is lost, each way,
+    #: drawn from a generator seeded with `link_loss_seed` (a lossy network, as the proxy of
+    #: the live fault tests)
+    link_loss: float = 0.0
+    link_loss_seed: int = 0
 
     def stalled(self, t: float) -> bool:
         return any(start <= t < end for start, end in self.gcs_stalls)
@@ -268,6 +273,7 @@ class _LockstepMission:
             keep_packets=True,
         )
         self.delay = DelayLine()
+        self._loss_draws = np.random.default_rng(options.faults.link_loss_seed)
         self._last_due: dict[tuple[int, str], float] = {}  # (UAV, direction): FIFO when late
         # each vehicle's own MAVLink identity, to frame what it sends as its radio would
         self.encoders = [
@@ -447,7 +453,10 @@ class _LockstepMission:
             link.outbox.clear()
 
     def _cut(self, index: int, sim_s: float) -> bool:
+        """The packet sent now to or from UAV `index` is lost (`Faults.link_cuts`, `link_loss`)."""
         faults = self.options.faults
+        if faults.link_loss > 0 and self._loss_draws.random() < faults.link_loss:
+            return True
         return bool(faults.link_cuts) and faults.cut(index + 1, sim_s - self.sim_zero)
 
     def _due(self, index: int, direction: str, sim_s: float, delay: float) -> float:
@@ -483,6 +492,10 @@ class _LockstepMission:
 
     # ------------------------------------------------------------------ samples and result
     def _sample(self, sim_s: float) -> None:
+        if self.clock.frozen:
+            # a stall being resolved: the mission clock stands at the stall's start while the
+            # UAVs flew on (the sample would pair them with V_n there: 9.4 m that never were)
+            return
         t = self.mission_time(sim_s)
         self._times.append(t)
         self._positions.append(self.fleet.dynamics.position.copy())

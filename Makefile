@@ -8,7 +8,7 @@ EXTRAS_STAMP := $(VENV)/.installed-extras
 
 .PHONY: demo test test-fast bench lint clean
 
-# requirements-interop.lock: MAVProxy for tests/test_interop.py, without its GUI dependencies.
+# requirements-interop.lock: MAVProxy for tests/flights/test_interop.py, without its GUI dependencies.
 $(STAMP): requirements.lock requirements-interop.lock pyproject.toml
 	$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11) and "fleetline needs Python 3.11+")'
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)

@@ -17,7 +17,7 @@ telemetry tick and every setpoint tick convert:
   (eq. 4c) and height (eq. 7). It is the algorithm of pymap3d's ``ecef2geodetic``.
 
 Both steps are pymap3d's own numpy operations, in its order, so the results are pymap3d's to
-the last bit (`tests/test_fleetwire_geodesy.py` compares them over a range of points), but one
+the last bit (`tests/fleetwire/test_fleetwire_geodesy.py` compares them over a range of points), but one
 conversion of 9 points costs about 30 us instead of 100 us: pymap3d looks the ellipsoid up,
 tests every point for the degenerate cases with `isclose` and assigns through boolean masks on
 every call, and tests whether a point is below the ellipsoid where the confocal ellipsoid

@@ -6,7 +6,7 @@ Each command group lives in its own module `gcs/cli/cmd_<group>.py` exposing
 Every group is imported at start-up (to build the parser), so a group module imports at its
 top only what planning needs anyway (the mission, the planner, rich); the flight stack
 (pymavlink, drivers, core), MCAP and matplotlib are imported inside the handlers that use
-them (tests/test_startup.py checks `gcs mission plan` imports none of them).
+them (tests/gcs/test_startup.py checks `gcs mission plan` imports none of them).
 
 Exit statuses (docs/cli.md): 0 success, 1 the command ran and failed (no valid path, mission
 aborted...), 2 bad input. Bad input (`InputError`, argparse usage errors) is one line on

@@ -22,7 +22,7 @@ from gcs.sim.fastsim import FastOptions, fly_fast
 from planner.scenarios import city_grid, random_buildings
 from tests.sight_checks import brute_connected
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
 def with_rule(folder: Path, source: Path, rule: str = "line_of_sight", **changes) -> Path:

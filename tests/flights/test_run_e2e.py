@@ -25,7 +25,7 @@ from tests.flying import (
     read_log,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 MISSION = REPO / "examples" / "small.yaml"
 SPEEDUP = str(flight_speedup(5))  # lower on a busy machine (tests/flying.py)
 #: UAV 2 (the leader) gets a process of its own anyway: [1], [2], [3, 4]

@@ -24,7 +24,7 @@ from gcs.sim.fastsim import FastOptions, fly_fast
 
 pytestmark = pytest.mark.slow
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 MISSION = REPO / "tests" / "missions" / "core.yaml"
 SECONDS = 60.0
 REQUEST_AT = 20.0

@@ -27,7 +27,7 @@ from gcs.planning import plan_mission
 from gcs.sim.fastsim import FastOptions, fly_fast
 from tests.cli_refusals import one_line_exit_2
 
-MISSION = Path(__file__).resolve().parent / "missions" / "core.yaml"
+MISSION = Path(__file__).resolve().parents[1] / "missions" / "core.yaml"
 
 
 @pytest.fixture(scope="module")

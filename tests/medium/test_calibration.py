@@ -3,7 +3,7 @@ that follow its quantiles and loss ratios, the load level nearest the offered lo
 extrapolation beyond the largest measured hop count; the simple model left as it was; the
 mission's `radio.model` and `radio.calibration`, the medium's `--model` and `--calibration`,
 the fast mode flying with the calibrated model; `gcs eval calibrate`'s scenarios, reduction
-and refusals before ns-3 is needed (tests/test_calibration_ns3.py runs it in ns-3).
+and refusals before ns-3 is needed (tests/medium/test_calibration_ns3.py runs it in ns-3).
 """
 
 from __future__ import annotations

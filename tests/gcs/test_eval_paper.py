@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-MISSIONS = Path(__file__).resolve().parent / "missions"  # core.yaml: a short flight
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+MISSIONS = Path(__file__).resolve().parents[1] / "missions"  # core.yaml: a short flight
 FIGURES = [
     "fig08_min_uav_uav.png",
     "fig09_min_uav_obstacle.png",

@@ -18,7 +18,7 @@ from gcs.planning import plan_mission
 from gcs.sim.fastsim import FastOptions, fly_fast
 from medium.radio_stats import KINDS
 
-MISSION = Path(__file__).resolve().parents[1] / "examples" / "small.yaml"
+MISSION = Path(__file__).resolve().parents[2] / "examples" / "small.yaml"
 
 
 @pytest.fixture(scope="module")
@@ -108,7 +108,7 @@ def test_a_fleet_forced_too_small_is_cut_off(plan):
 def test_a_uav_with_a_small_battery_reports_less_left_by_the_end(tmp_path):
     """tests/missions/core.yaml with `sim.battery_mah: [8000, 1000, 8000, 8000]`: the
     SYS_STATUS battery_remaining each UAV last reported to its driver."""
-    core = Path(__file__).resolve().parent / "missions" / "core.yaml"
+    core = Path(__file__).resolve().parents[1] / "missions" / "core.yaml"
     text = core.read_text().replace(
         "sim: {setpoint_rate_hz: 10, seed: 3}",
         "sim: {setpoint_rate_hz: 10, seed: 3, battery_mah: [8000, 1000, 8000, 8000]}",

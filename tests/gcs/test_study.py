@@ -18,7 +18,7 @@ from gcs.study.report import axis_table, mean_ci, t95, write_report
 from gcs.study.studyfile import load_study
 from gcs.study.table import RowWriter, read_rows
 
-MISSIONS = Path(__file__).resolve().parent / "missions"
+MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 TINY = MISSIONS / "study-tiny.yaml"
 FAIL = MISSIONS / "study-fail.yaml"
 
@@ -302,7 +302,7 @@ def test_a_connectivity_axis_plans_and_flies_both_rules(gcs_main, tmp_path):
     """`axes.connectivity: [disk, line_of_sight]` on the small mission: the line-of-sight run
     is connected by line of sight at every sample, the disk run is not; a rule that does not
     exist is refused with the axis named."""
-    shutil.copy(Path(__file__).resolve().parents[1] / "examples" / "small.yaml", tmp_path)
+    shutil.copy(Path(__file__).resolve().parents[2] / "examples" / "small.yaml", tmp_path)
     study = tmp_path / "study.yaml"
     study.write_text(
         "version: 1\nbase: small.yaml\naxes:\n  connectivity: [disk, line_of_sight]\n"

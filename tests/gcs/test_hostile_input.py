@@ -18,7 +18,7 @@ import gcs.cli
 from fleetwire.files import MAX_NESTING, MISSION_BYTES
 from medium.calibration import load_calibration
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "small.yaml"
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "small.yaml"
 #: Generous bounds: a refusal is immediate; reading /dev/zero took 7.6 GB before.
 SECONDS = 10.0
 MEGABYTES = 300

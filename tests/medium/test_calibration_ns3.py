@@ -20,7 +20,7 @@ from medium.calibration import DEFAULT_CALIBRATION, load_calibration
 
 pytestmark = pytest.mark.slow
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def calibrate(*args: str | Path) -> subprocess.CompletedProcess:

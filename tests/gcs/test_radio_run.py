@@ -24,7 +24,7 @@ from gcs.planning import plan_mission
 from gcs.sim.fastsim import fly_fast
 from tests.flying import flight_speedup
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 MISSION = REPO / "examples" / "small.yaml"
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 

@@ -41,7 +41,7 @@ TRANSCRIPTS = (
 )
 
 #: The project's original recordings, when the repository sits beside `shared/`.
-SHARED_SITL = Path(__file__).resolve().parents[2] / "shared" / "sitl"
+SHARED_SITL = Path(__file__).resolve().parents[3] / "shared" / "sitl"
 
 
 @pytest.mark.skipif(not SHARED_SITL.is_dir(), reason="no ../shared/sitl beside the repository")

@@ -10,7 +10,7 @@ operator's speed change is refused. An operator's return before everyone is on s
 the same way; a second return, a return on an A -> B mission and a return while everyone
 lands are refused. The operator socket's `return` and `relieve` commands and the refusals of
 `gcs return` and `gcs relieve` close the file (the round trip over a real mission is
-tests/test_stations_e2e.py).
+tests/flights/test_stations_e2e.py).
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ def planned_stations(plan) -> dict:
 
 def assert_guarantees(run, plan) -> None:
     """The planner's guarantees at every sampled instant, on the true positions (as
-    tests/test_fastsim.py): tracking below rho_c, UAV-UAV and UAV-obstacle distances within
+    tests/gcs/test_fastsim.py): tracking below rho_c, UAV-UAV and UAV-obstacle distances within
     what that tracking allows, every UAV chained to a base station."""
     rho = plan.mission.safety_margin
     tracking = float(run.tracking_error_m.max())

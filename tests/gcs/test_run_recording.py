@@ -203,7 +203,7 @@ def test_never_anchored_records_are_still_written(tmp_path: Path):
 
 
 # --------------------------------------------------------------------------- the run's context
-SMALL = Path(__file__).resolve().parents[1] / "examples" / "small.yaml"
+SMALL = Path(__file__).resolve().parents[2] / "examples" / "small.yaml"
 #: A building south-east of the small mission's path, as lon/lat (a 25 m square).
 BUILDING = [
     [4.838270849664592, 45.763100283261664],

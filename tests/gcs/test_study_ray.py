@@ -16,7 +16,7 @@ from gcs.study.table import read_rows
 
 pytestmark = pytest.mark.slow
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 TINY = REPO / "tests" / "missions" / "study-tiny.yaml"
 FAIL = REPO / "tests" / "missions" / "study-fail.yaml"
 

@@ -25,7 +25,7 @@ from gcs.planning import plan_mission
 from gcs.sim.fastsim import FastOptions, Faults, fly_fast
 from gcs.transport.link import MemoryLink
 
-MISSION = Path(__file__).resolve().parent / "missions" / "core.yaml"
+MISSION = Path(__file__).resolve().parents[1] / "missions" / "core.yaml"
 
 
 @pytest.fixture(scope="module")

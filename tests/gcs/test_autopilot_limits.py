@@ -17,7 +17,7 @@ from gcs.drivers.parameters import Encoding, ParameterTable, decode_value, encod
 from gcs.transport.link import mavutil
 
 mavlink = mavutil.mavlink
-SITL = Path(__file__).resolve().parent / "sitl"
+SITL = Path(__file__).resolve().parents[1] / "sitl"
 
 
 def _transcript_params(name: str) -> list[dict]:

@@ -35,7 +35,7 @@ from tests.foxglove_client import (
     foxglove_send,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 MISSION = REPO / "examples" / "small.yaml"
 SPEEDUP = str(flight_speedup(5))  # lower on a busy machine (tests/flying.py)
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]

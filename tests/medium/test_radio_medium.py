@@ -23,7 +23,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from medium.cli import main as medium_main
 from vehicles.testing import GroundStation, VehicleProcess, free_udp_ports, local_of
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SETPOINT_PERIOD_S = 0.1
 pytestmark = pytest.mark.timeout(90)
 

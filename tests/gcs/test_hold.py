@@ -20,7 +20,7 @@ from gcs.planning import plan_mission
 from gcs.recording.logreader import read_recording
 from gcs.sim.fastsim import FastOptions, Faults, fly_fast
 
-MISSION = Path(__file__).resolve().parent / "missions" / "core.yaml"
+MISSION = Path(__file__).resolve().parents[1] / "missions" / "core.yaml"
 LATE_FROM, LATE_TO = 12.0, 16.0  # mission s: the fault's window (the formation is cruising)
 
 

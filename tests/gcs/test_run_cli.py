@@ -10,7 +10,7 @@ import pytest
 import gcs.cli
 import gcs.cli.cmd_mission
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SMALL = REPO / "examples" / "small.yaml"
 NO_PATH = REPO / "tests" / "missions" / "no-path.yaml"
 

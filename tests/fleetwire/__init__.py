@@ -1,0 +1,1 @@
+"""The shared wire's tests (signing clocks, geodesy, the world clock)."""

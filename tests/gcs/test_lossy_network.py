@@ -1,6 +1,6 @@
 """A lossy network between the ground station and its fleet, in the fast mode on simulated
 time: every packet each way lost with probability 30 % (seeded), as the proxy of the live fault
-test (`tests/flights/test_faults_e2e.py`) loses them. Over 40 seeds the worst tracking error is 4.48 m
+test (`tests/flights/test_faults_e2e.py`) loses them. Over 40 seeds the worst tracking error is 4.46 m
 (BENCHMARKS.md, "Faults"); before the fixes below, 4 of 12 seeds broke rho_c.
 
 Faults of the ground station that showed only there (fast mode, `examples/small.yaml`); the
@@ -18,7 +18,7 @@ first two fail these tests without their fix:
   The ground station stopped the stream when it asked; it now streams until a heartbeat shows
   LAND (`gcs.drivers.base.Driver.wants_setpoints`, tested in `tests/gcs/test_drivers_sim.py`).
   With 40 % loss the same reversal still happens mid-path, at the end of a hold's braking
-  (7.2 m, seed 4): 7 of 20 seeds break rho_c, a known limit (the closing note of stop 41).
+  (seed 4): 6 of 20 seeds break rho_c, worst 7.78 m, a known limit (BENCHMARKS.md, "Faults").
 """
 
 from __future__ import annotations

@@ -16,13 +16,13 @@ telemetry tick and every setpoint tick convert:
   ellipsoid through the point (eqs. 4a-4b), one correction step (eq. 13), then latitude
   (eq. 4c) and height (eq. 7). It is the algorithm of pymap3d's ``ecef2geodetic``.
 
-Both steps are pymap3d's own numpy operations, in its order, so the results are pymap3d's to
-the last bit (`tests/fleetwire/test_fleetwire_geodesy.py` compares them over a range of points), but one
-conversion of 9 points costs about 30 us instead of 100 us: pymap3d looks the ellipsoid up,
-tests every point for the degenerate cases with `isclose` and assigns through boolean masks on
-every call, and tests whether a point is below the ellipsoid where the confocal ellipsoid
-through it already says so. The degenerate points (within 1 mm of the polar axis, where pymap3d patches the
-latitude and height, or of the Earth's centre) are handed to pymap3d itself.
+Both steps are pymap3d's own numpy operations, in its order, so the results are pymap3d's to the
+last bit (`tests/fleetwire/test_fleetwire_geodesy.py` compares them over a range of points), but one
+conversion of 9 points costs about 30 us instead of 100 us: pymap3d looks the ellipsoid up, tests
+every point for the degenerate cases with `isclose` and assigns through boolean masks on every call,
+and tests whether a point is below the ellipsoid where the confocal ellipsoid through it already
+says so. The degenerate points (within 1 mm of the polar axis, where pymap3d patches the latitude
+and height, or of the Earth's centre) are handed to pymap3d itself.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Helpers of the tests of `gcs.transport.link` over real loopback UDP: receiving what a link hears."""
+"""Helpers of the tests of `gcs.transport.link` on real loopback UDP: what a link hears."""
 
 from __future__ import annotations
 

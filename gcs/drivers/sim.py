@@ -125,9 +125,8 @@ class SimVehicleSetup:
     leaders: dict[int, list[tuple[float, float]]] = field(default_factory=dict)
     extra_args: tuple[str, ...] = ()
     log_dir: Path | None = None  # where each process's stderr goes (None: discarded)
-    radio: MediumSetup | None = (
-        None  # links through the radio medium (gcs.sim.medium_process); None: direct
-    )
+    #: links through the radio medium (gcs.sim.medium_process); None: direct
+    radio: MediumSetup | None = None
     #: lockstep: the vehicles and the medium take their time from the ground station's mission
     #: clock (fleetwire.worldclock) when the speed-up is above 1; False: the wall clock
     lockstep: bool = True

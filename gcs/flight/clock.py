@@ -125,14 +125,14 @@ class VehicleClock:
     """Maps one vehicle's clock (time_boot_ms) to mission time, so that samples keep the time
     they were taken even when the ground station read them late (a busy machine, a stall).
 
-    offset = min over recent samples of (mission time at receipt - vehicle time): the least
-    delayed sample bounds the offset best. Both clocks run at the same speedup. A vehicle clock
-    that goes back more than `reboot_jump_s` (a reboot) starts the estimate over; a smaller step
-    back is a sample overtaken on the way (a reordering network), mapped like any other. One that fell behind (a simulator
-    that could not keep up and says its clock slipped: `slipped`) moves every offset by the
-    slip: without it the minimum keeps the old offset and maps every sample the slip too early
-    for a whole window. After the mission clock was held back (`pause`), a sample taken while
-    the mission stood still maps to the instant it paused.
+    offset = min over recent samples of (mission time at receipt - vehicle time): the least delayed
+    sample bounds the offset best. Both clocks run at the same speedup. A vehicle clock that goes
+    back more than `reboot_jump_s` (a reboot) starts the estimate over; a smaller step back is a
+    sample overtaken on the way (a reordering network), mapped like any other. One that fell behind
+    (a simulator that could not keep up and says its clock slipped: `slipped`) moves every offset by
+    the slip: without it the minimum keeps the old offset and maps every sample the slip too early
+    for a whole window. After the mission clock was held back (`pause`), a sample taken while the
+    mission stood still maps to the instant it paused.
 
     A vehicle whose telemetry is late and one whose clock fell behind look the same from here
     (steadily larger offsets): only the vehicle can tell, so only its report moves the offsets.

@@ -1686,12 +1686,6 @@ class GroundStation:
             # the raw time: while a stall is being resolved the clock stands still, but the
             # samples keep the time they were taken (mapped onto the pause afterwards)
             received = self.clock.raw_mission_time(now)
-            heard = tel.true_vehicle_time_heard if truth else None
-            if vehicle_s is not None and heard is not None:
-                # SIM_STATE has no time of its own: the timed messages of its tick may have
-                # been lost, so it is at least as much later than the last vehicle time heard
-                # as it arrived after it (both clocks run at the speed-up)
-                vehicle_s += max(0.0, received - self.clock.raw_mission_time(heard))
             t = self._vehicle_clocks[index].mission_time(vehicle_s, received)
             track.last_sample_time = t
             self._samples.append(

@@ -174,8 +174,8 @@ class HoldPolicy:
 
     def back(self, t: float, uavs: list[UavState]) -> bool:
         """The reference stands still and every following UAV is back within `resume_m` of its
-        target and not drifting away (`reach_m`), its telemetry current (a UAV that stopped following is judged where the
-        formation stopped, not while it slows down)."""
+        target and not drifting away (`reach_m`), its telemetry current (a UAV that stopped
+        following is judged where the formation stopped, not while it slows down)."""
         if self.current is not None and t < self.current.standing_s:
             return False
         return all(

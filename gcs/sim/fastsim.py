@@ -1,14 +1,14 @@
 """The fast in-process mode: a planned mission flown in lockstep, as fast as the CPU allows.
 
-The ground station is THE ground-station core (`gcs.flight.core.GroundStation`) with the
-simulated backend's drivers (`gcs.drivers.sim.SimDriver`), exactly as `gcs mission run` flies
-it; only the loop around it differs. Instead of sockets and the wall clock: the same vehicles
-as the networked simulation (`vehicles.lockstep`: the dynamics and the ArduCopter-like
-autopilots of `vehicles sim`), the same radio medium model (`medium.medium.MediumModel`:
-unit-disk graph on the true positions, per-hop latency, jitter and loss, ground users and UAV
-data), in-memory links (`gcs.transport.link.MemoryLink`), and simulated time as the loop's clock. Every
-MAVLink message goes through the medium: a packet with no path is dropped, the others arrive
-after their hops' delay.
+The ground station is THE ground-station core (`gcs.flight.core.GroundStation`) with the simulated
+backend's drivers (`gcs.drivers.sim.SimDriver`), exactly as `gcs mission run` flies it; only the
+loop around it differs. Instead of sockets and the wall clock: the same vehicles as the networked
+simulation (`vehicles.lockstep`: the dynamics and the ArduCopter-like autopilots of `vehicles sim`),
+the same radio medium model (`medium.medium.MediumModel`: unit-disk graph on the true positions,
+per-hop latency, jitter and loss, ground users and UAV data), in-memory links
+(`gcs.transport.link.MemoryLink`), and simulated time as the loop's clock. Every MAVLink message
+goes through the medium: a packet with no path is dropped, the others arrive after their hops'
+delay.
 
 Differences from a networked run: no recording unless asked (`FastOptions.log`; the run
 JSON's `log` is null without one, and the MAVLink topics are never written), no signing, and

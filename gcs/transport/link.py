@@ -130,8 +130,8 @@ class Link(_Liveness):
 
     def setup_signing(self, secret_key: bytes, **options) -> None:
         """MAVLink 2 signing, pymavlink's `mavfile.setup_signing`: sign what is sent and refuse
-        unsigned input unless `allow_unsigned_callback` accepts it (see `gcs.transport.signing`); refused
-        frames are bad data, never a sign of life."""
+        unsigned input unless `allow_unsigned_callback` accepts it (see `gcs.transport.signing`);
+        refused frames are bad data, never a sign of life."""
         self._conn.setup_signing(secret_key, **options)
 
     def send(self, message, now: float) -> None:

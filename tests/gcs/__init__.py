@@ -1,1 +1,1 @@
-"""The ground station's tests: the core's policies on simulated time, drivers, CLI, recording, evaluation."""
+"""The ground station's tests: policies on simulated time, drivers, CLI, recording, evaluation."""

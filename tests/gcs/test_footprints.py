@@ -1,5 +1,5 @@
-"""Footprint files (gcs.mission.footprints): messy GeoJSON skipped / repaired / dropped and reported in
-one warning line, strict refusals, projected CRSs, heights, the optional OSM and GIS readers
+"""Footprint files (gcs.mission.footprints): messy GeoJSON skipped / repaired / dropped and reported
+in one warning line, strict refusals, projected CRSs, heights, the optional OSM and GIS readers
 (skipped when their extra is absent) and the plan JSON's `map`. In-process and fast."""
 
 from __future__ import annotations

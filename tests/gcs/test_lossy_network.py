@@ -1,6 +1,6 @@
-"""A lossy network between the ground station and its fleet, in the fast mode on simulated
-time: every packet each way lost with probability 30 % (seeded), as the proxy of the live fault
-test (`tests/flights/test_faults_e2e.py`) loses them. Over 40 seeds the worst tracking error is 4.46 m
+"""A lossy network between the ground station and its fleet, in the fast mode on simulated time:
+every packet each way lost with probability 30 % (seeded), as the proxy of the live fault test
+(`tests/flights/test_faults_e2e.py`) loses them. Over 40 seeds the worst tracking error is 4.46 m
 (BENCHMARKS.md, "Faults"); before the fixes below, 4 of 12 seeds broke rho_c.
 
 Faults of the ground station that showed only there (fast mode, `examples/small.yaml`); the

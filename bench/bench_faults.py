@@ -9,7 +9,8 @@ most), and the state of the log. A last row flips one byte of a recording and as
 A second table flies the same mission in the fast mode over a lossy network, every packet
 each way lost with a probability (`Faults.link_loss`), one flight per seed: how many complete
 within rho_c, the worst tracking error the ground station measured and the true one, and the
-holds."""
+holds. A third cuts one UAV's link both ways for 2.5 s and 3.5 s at moments from take-off to
+the speed changes (`Faults.link_cuts`): the cut UAV flies its last setpoint on alone."""
 
 from __future__ import annotations
 
@@ -35,6 +36,11 @@ from tests.flying import (
 )
 
 LOSSY_SEEDS = {0.3: 40, 0.4: 20}  # loss probability -> seeds flown
+#: Link cuts flown by `link_cuts`: cut lengths (s), the UAVs cut, and the cut starts (mission
+#: s: taking off, the start, joining, cruising, the speed changes at 20 s and 35 s).
+CUT_LENGTHS = (2.5, 3.5)
+CUT_UAVS = (1, 2, 3, 4)
+CUT_STARTS = (-1.0, -0.6, -0.2, 0.2, 0.4, 0.6, 1.0, 2.0, 5.0, 19.6, 20.0, 20.4, 34.6, 35.0, 40.0)
 
 FOLLOWING = "UAV 4: taking_off -> following"
 
@@ -171,6 +177,42 @@ def lossy(seeds: dict[float, int] = LOSSY_SEEDS) -> Table:
     return table
 
 
+def link_cuts(
+    lengths: tuple[float, ...] = CUT_LENGTHS,
+    uavs: tuple[int, ...] = CUT_UAVS,
+    starts: tuple[float, ...] = CUT_STARTS,
+) -> Table:
+    """The fast mode with one UAV's link cut both ways (`Faults.link_cuts`), one flight per
+    (length, UAV, start): the cut UAV flies its last setpoint on alone, then brakes."""
+    import numpy as np
+
+    from gcs.mission import load_mission
+    from gcs.planning import plan_mission
+    from gcs.sim.fastsim import FastOptions, Faults, fly_fast
+
+    plan = plan_mission(load_mission(MISSION))
+    rho_c = plan.mission.safety_margin
+    table = Table(title="the small mission with one UAV's link cut (fast mode)")
+    for name in ("cut", "flights", "within rho_c", "worst true m", "mean worst m",
+                 "flights that held", "link lost"):  # fmt: skip
+        table.add_column(name)
+    for length in lengths:
+        worst, held, lost = [], 0, 0
+        for uav in uavs:
+            for start in starts:
+                cut = Faults(link_cuts=((uav, start, start + length),))
+                run = fly_fast(plan, FastOptions(faults=cut))
+                worst.append(float(np.nanmax(run.tracking_error_m)))
+                kinds = {event["kind"] for event in run.run_json["events"]}
+                held += "hold" in kinds
+                lost += "link_lost" in kinds
+        table.add_row(
+            f"{length:g} s", str(len(worst)), str(sum(w < rho_c for w in worst)),
+            f"{max(worst):.2f}", f"{float(np.mean(worst)):.2f}", str(held), str(lost),
+        )  # fmt: skip
+    return table
+
+
 def main(cases=CASES) -> None:
     table = Table(title="faults on the small mission (rho_c 5 m)")
     for name in ("fault", "exit", "outcome", "max tracking m", "UAVs", "log"):
@@ -186,6 +228,7 @@ def main(cases=CASES) -> None:
             table.add_row(*flipped_byte(kept))
     Console(width=220).print(table)
     Console(width=220).print(lossy())
+    Console(width=220).print(link_cuts())
 
 
 if __name__ == "__main__":

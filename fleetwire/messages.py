@@ -36,6 +36,11 @@ def parse_clock_slipped(text: str) -> float | None:
     return seconds if math.isfinite(seconds) and seconds > 0 else None
 
 
+#: Seconds our simulated vehicles fly a setpoint's velocity and acceleration on when the stream
+#: stops (at most; then their setpoint timeout brakes them): the ground station dead-reckons a
+#: silent UAV over the same span (`gcs.flight.silent`).
+SETPOINT_EXTRAPOLATION_S = 1.0
+
 #: type_mask bits of SET_POSITION_TARGET_* (MAVLink POSITION_TARGET_TYPEMASK).
 IGNORE_ACCELERATION = (
     mavlink.POSITION_TARGET_TYPEMASK_AX_IGNORE

@@ -329,9 +329,12 @@ class FleetDynamics:
         """Estimated position of vehicle ``index``, (3,) (a new array)."""
         return self._position[:, index] + self._navigation[:, index]
 
-    def stopping_point(self, index: int) -> np.ndarray:
-        """Where vehicle ``index`` stops if it decelerates now at the shaping deceleration."""
+    def stopping_point(self, index: int, deceleration: float | None = None) -> np.ndarray:
+        """Where vehicle ``index`` stops if it decelerates now horizontally at ``deceleration``
+        (m/s^2; None: the controller's shaping deceleration)."""
         decel = self.config.controller.shaping_acceleration_mps2
+        if deceleration is not None:
+            decel = deceleration
         velocity = self.velocity[index]
         point = self.position[index] + self.navigation_error[index]
         horizontal = velocity.copy()

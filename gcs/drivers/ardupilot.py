@@ -125,5 +125,9 @@ class ArduPilotDriver(Driver):
         return False  # GUIDED position targets are held forever
 
     @property
+    def setpoint_horizon_s(self) -> float:
+        return 3.0  # GUID_TIMEOUT's default: the guided target moves on at its velocity
+
+    @property
     def home_tolerance_m(self) -> float:
         return 1.0  # SITL puts home exactly where --custom-location says

@@ -47,7 +47,7 @@ What it MAY override (defaults: a plain, well-behaved autopilot)
   confirmation time, HOME_POSITION pacing, the window in which a STATUSTEXT explains a refusal.
 * Capability properties: `accepts_acceleration_feedforward`,
   `needs_setpoint_stream_before_offboard`, `acks_set_mode`, `setpoints_time_out_on_vehicle`,
-  `honours_speed_change_time`, `home_tolerance_m`.
+  `setpoint_horizon_s`, `honours_speed_change_time`, `home_tolerance_m`.
 * `stream_rates_hz` (class attribute): the telemetry streams asked for (or turned off, rate 0)
   by `on_connected(now)`, which runs once, after the first heartbeat.
 * `limit_parameters` and `parameter_encoding` (class attributes): the parameters that bound
@@ -579,6 +579,13 @@ class Driver(ABC):
     def setpoints_time_out_on_vehicle(self) -> bool:
         """Whether the vehicle itself holds when setpoints stop (ArduPilot GUIDED does not)."""
         return True
+
+    @property
+    def setpoint_horizon_s(self) -> float:
+        """How long the vehicle flies its last setpoint's feed-forward on when the stream
+        stops, before it brakes (PX4 waits COM_OF_LOSS_T, 1 s by default): what
+        `gcs.flight.silent` dead-reckons a silent UAV with."""
+        return 1.0
 
     @property
     def honours_speed_change_time(self) -> bool:

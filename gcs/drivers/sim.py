@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fleetwire.messages import MISSION_TIME_NAME, encode_mission_time
+from fleetwire.messages import MISSION_TIME_NAME, SETPOINT_EXTRAPOLATION_S, encode_mission_time
 from fleetwire.modes import COPTER_MODE, COPTER_MODE_NAME
 from fleetwire.worldclock import WorldClockMaster
 from gcs.drivers.base import CommandSpec, Driver, Fleet, FleetProblem, FlightMode
@@ -96,6 +96,10 @@ class SimDriver(Driver):
     @property
     def accepts_acceleration_feedforward(self) -> bool:
         return True
+
+    @property
+    def setpoint_horizon_s(self) -> float:
+        return SETPOINT_EXTRAPOLATION_S
 
     @property
     def honours_speed_change_time(self) -> bool:

@@ -106,6 +106,10 @@ class UavState:
     tracking_error_m: float
     sample_time: float | None
     error_growth_mps: float = 0.0
+    #: for a UAV not heard lately: the largest tracking error it reaches flying its last
+    #: setpoint on alone if the formation holds now, and if it holds a tick later
+    #: (`gcs.flight.silent`); None for a UAV heard lately
+    silent_errors_m: tuple[float, float] | None = None
 
 
 @dataclass
@@ -165,12 +169,32 @@ class HoldPolicy:
                     f"{self.hold_threshold_m:.2f} m (rho_c less the tracking allowance) "
                     "before it can close"
                 )
+            elif uav.silent_errors_m is not None:
+                if not self._silent_due(t, uav):
+                    continue
+                now_m, next_m = uav.silent_errors_m
+                why = (
+                    f"its telemetry lags mission time by {t - uav.sample_time:.1f} s; flying "
+                    f"its last setpoint on alone it would be {next_m:.2f} m from its target "
+                    f"if the formation held a tick later, {now_m:.2f} m if it holds now"
+                )
             elif uav.sample_time is not None and t - uav.sample_time > self.lag_s:
                 why = f"its telemetry lags mission time by {t - uav.sample_time:.1f} s"
             else:
                 continue
             out.append((uav.index + 1, why))
         return out
+
+    def _silent_due(self, t: float, uav: UavState) -> bool:
+        """Hold for a silent UAV now: waiting a tick would not bring the formation's targets
+        closer to where it stops, and waiting would break the threshold or it has been silent
+        longer than `lag_s` (a UAV carrying an accelerating setpoint on is held later, when
+        the targets would stop where it stops)."""
+        assert uav.silent_errors_m is not None and uav.sample_time is not None
+        now_m, next_m = uav.silent_errors_m
+        if now_m > next_m:
+            return False
+        return next_m >= self.hold_threshold_m or t - uav.sample_time > self.lag_s
 
     def back(self, t: float, uavs: list[UavState]) -> bool:
         """The reference stands still and every following UAV is back within `resume_m` of its

@@ -18,6 +18,7 @@ from tests.fakes.replay import load
 from vehicles import telemetry
 from vehicles.autopilot import AutopilotConfig, FailsafeConfig, Guided, Mode
 from vehicles.autopilot import ftp as mavftp
+from vehicles.autopilot.parameters import parameters
 from vehicles.sim import DEFAULT_ORIGIN
 
 LAT, LON, ALT = DEFAULT_ORIGIN.lat, DEFAULT_ORIGIN.lon, DEFAULT_ORIGIN.alt
@@ -110,6 +111,30 @@ def test_velocity_targets_stop_after_guid_timeout():
     bench.run(0.2)
     assert bench.autopilot.guided == Guided.HOLD
     assert "Guided: no setpoint for 3 s, holding" in bench.texts()
+
+
+def test_a_setpoint_timeout_brakes_at_wpnav_accel():
+    """After GUID_TIMEOUT the copter stops at the guided acceleration (WPNAV_ACCEL), as
+    ArduCopter's ModeGuided::pva_control_start gives the position controller the waypoint
+    navigator's acceleration: from 10 m/s at 6 m/s^2, about 8.3 m (a gentler shaping
+    deceleration of 3 m/s^2 ran 16.7 m, past a formation that stopped at a_max)."""
+    bench = Bench(AutopilotConfig(boot_time_s=0.0, failsafe=FailsafeConfig(setpoint_timeout_s=1.0)))
+    accel = bench.dynamics.config.airframe.max_acceleration_mps2
+    assert dict((name, value) for name, value, _ in parameters(bench.autopilot))[
+        "WPNAV_ACCEL"
+    ] == pytest.approx(accel * 100)
+    bench.fly(10.0)
+    for _ in range(60):  # 6 s of 10 m/s east, velocity targets at 10 Hz
+        bench.local_setpoint(0.0, 0.0, 0.0, 0.0, 10.0, 0.0, mask=0b110111000111)
+        bench.run(0.1)
+    while bench.autopilot.guided == Guided.SETPOINTS:
+        bench.run(0.02)
+    speed = float(np.hypot(*bench.dynamics.velocity[0, :2]))
+    start = position(bench)
+    bench.run(8.0)
+    assert speed == pytest.approx(10.0, abs=0.3)
+    run = float(np.hypot(*(position(bench) - start)[:2]))
+    assert speed**2 / (2 * accel) - 0.5 <= run <= speed**2 / (2 * accel) + 1.5
 
 
 @pytest.mark.parametrize(

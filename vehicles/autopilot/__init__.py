@@ -18,7 +18,8 @@ and AUTO (``missions``, ``auto``); MAVFTP is refused at once (``ftp``); unknown 
 UNSUPPORTED. Differences from ArduCopter, on purpose: refusals always carry a STATUSTEXT
 reason; a stream of position + velocity targets (the fleetline ground station's) that stops for
 ``setpoint_timeout_s`` (GUID_TIMEOUT, 1 s by default here, 3 s in ArduCopter) makes the vehicle
-brake and hold at its stopping point rather than at the last target, saying so (it stays in
+brake (at WPNAV_ACCEL, as ArduCopter's guided mode) and hold at its stopping point rather than
+at the last target, saying so (it stays in
 GUIDED and follows again when setpoints resume); losing the GCS (no valid message from its
 system id) makes it hold (BRAKE), then LAND.
 
@@ -35,7 +36,6 @@ One module per job: ``core`` (the :class:`Autopilot` facade: state, routing, tic
 from vehicles.autopilot.commands import FORCE_ARM_MAGIC, FORCE_DISARM_MAGIC
 from vehicles.autopilot.config import AutopilotConfig, FailsafeConfig
 from vehicles.autopilot.core import Autopilot
-from vehicles.autopilot.setpoints import MAX_EXTRAPOLATION_S
 from vehicles.autopilot.status import AutopilotStatus, BatteryState
 from vehicles.autopilot.types import ARMABLE_MODES, AUTOPILOT_COMPONENT, Guided, Mode, Stamp
 
@@ -44,7 +44,6 @@ __all__ = [
     "AUTOPILOT_COMPONENT",
     "FORCE_ARM_MAGIC",
     "FORCE_DISARM_MAGIC",
-    "MAX_EXTRAPOLATION_S",
     "Autopilot",
     "AutopilotConfig",
     "AutopilotStatus",

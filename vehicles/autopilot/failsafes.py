@@ -1,4 +1,4 @@
-"""The autopilot's failsafes: the setpoint timeout in GUIDED (brake and hold; follow again when
+"""The autopilot's failsafes: the setpoint timeout in GUIDED (brake at WPNAV_ACCEL and hold; follow again when
 setpoints resume, PX4's offboard-loss behaviour) and the GCS failsafe (hold in BRAKE, then
 LAND; armed by the GCS's first HEARTBEAT, cleared by any message from the GCS).
 
@@ -33,7 +33,7 @@ def update_setpoint_timeout(ap: Autopilot, stamp: Stamp) -> None:
     if expired(ap, ap.last_setpoint, timeout, stamp):
         ap.guided = Guided.HOLD
         ap.setpoint_timed_out = True
-        modes.hold_here(ap)
+        modes.guided_brake(ap)
         ap.status_text(
             mavlink.MAV_SEVERITY_WARNING, f"Guided: no setpoint for {timeout:g} s, holding"
         )

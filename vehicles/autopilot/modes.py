@@ -56,10 +56,20 @@ def idle_on_ground(ap: Autopilot) -> None:
     ap.dynamics.yaw_target[ap.index] = np.nan
 
 
-def hold_here(ap: Autopilot) -> None:
-    """Brake to the stopping point and hold it."""
+def hold_here(ap: Autopilot, deceleration: float | None = None) -> None:
+    """Brake to the stopping point at ``deceleration`` (m/s^2; None: the controller's shaping
+    deceleration) and hold it."""
     set_limits(ap)
-    ap.dynamics.hold(ap.index, ap.dynamics.stopping_point(ap.index))
+    ap.dynamics.hold(ap.index, ap.dynamics.stopping_point(ap.index, deceleration))
+
+
+def guided_brake(ap: Autopilot) -> None:
+    """GUIDED's stop (entering GUIDED in the air, a setpoint timeout): brake at the guided
+    acceleration WPNAV_ACCEL (the airframe's horizontal limit here), as ArduCopter's
+    ``ModeGuided::pva_control_start`` gives the position controller the waypoint navigator's
+    acceleration; stopping at a gentler shaping deceleration overshot a formation that stopped
+    at a_max by up to 14 m."""
+    hold_here(ap, ap.dynamics.config.airframe.max_acceleration_mps2)
     ap.dynamics.yaw_target[ap.index] = ap.dynamics.yaw[ap.index]
 
 
@@ -107,7 +117,7 @@ def set_mode(ap: Autopilot, mode: int, stamp: Stamp) -> tuple[bool, str | None]:
     if mode == Mode.GUIDED:
         ap.guided = Guided.HOLD
         ap.last_setpoint = None
-        hold_here(ap)
+        guided_brake(ap)
     elif mode in (Mode.LOITER, Mode.BRAKE, Mode.AUTO):  # AUTO holds until its mission starts
         hold_here(ap)
     elif mode == Mode.LAND:

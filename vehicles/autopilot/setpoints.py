@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from fleetwire.messages import SETPOINT_EXTRAPOLATION_S
 from vehicles.autopilot import modes
 from vehicles.autopilot.types import Guided, Mode, Stamp
 from vehicles.frames import ned_to_enu, rotate_body_to_ned
@@ -31,7 +32,6 @@ from vehicles.frames import ned_to_enu, rotate_body_to_ned
 if TYPE_CHECKING:
     from vehicles.autopilot.core import Autopilot
 
-MAX_EXTRAPOLATION_S = 1.0  # a setpoint's feed-forward is extrapolated for at most this long
 
 _LOCAL_FRAMES = (
     mavlink.MAV_FRAME_LOCAL_NED,
@@ -228,7 +228,7 @@ def apply_setpoint(
         modes.set_limits(ap, speed=ap.config.waypoint_speed_mps)
         ap.dynamics.hold(i, position)
     else:
-        horizon = min(ap.config.failsafe.setpoint_timeout_s, MAX_EXTRAPOLATION_S)
+        horizon = min(ap.config.failsafe.setpoint_timeout_s, SETPOINT_EXTRAPOLATION_S)
         modes.set_limits(ap)
         ap.dynamics.set_reference(
             i, position, velocity, acceleration, horizon_s=horizon, time_s=stamp.sim_s

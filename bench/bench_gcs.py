@@ -23,10 +23,11 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from gcs.drivers.base import DriverTiming, Phase, UavSpec
+from gcs.drivers.base import DriverTiming, Phase
 from gcs.drivers.sim import SimDriver
+from gcs.flight.assembly import assemble
 from gcs.flight.clock import MissionClock
-from gcs.flight.core import GroundStation, RunOptions
+from gcs.flight.core import RunOptions
 from gcs.flight.live import LiveLoop
 from gcs.mission import parse_mission
 from gcs.recording.recording import FlightRecorder
@@ -99,21 +100,14 @@ def measure(size: int, seconds: float, directory: Path) -> dict:
     options = RunOptions(
         setpoint_rate_hz=RATE_HZ, link_timeout_s=1e9, link_wall_floor_s=1e9, takeoff_lead_s=1.0
     )
-    drivers, links = [], []
-    formation = plan.formation
-    for index, sink in enumerate(sinks):
-        uav = index + 1
-        url = f"udpout:127.0.0.1:{sink.getsockname()[1]}"
-        link = Link(url, uav, capture=_capture(recorder, uav))
-        spec = UavSpec(
-            uav, uav, url, plan.mission.origin, formation.start_slots[index],
-            formation.goal_slots[index], 30.0,
-        )  # fmt: skip
-        driver = SimDriver(spec, link, DriverTiming())
+    links = [
+        Link(f"udpout:127.0.0.1:{sink.getsockname()[1]}", uav, capture=_capture(recorder, uav))
+        for uav, sink in enumerate(sinks, start=1)
+    ]
+    run = assemble(plan, links, SimDriver, DriverTiming(), clock, recorder, options)
+    drivers = run.drivers
+    for driver in drivers:
         driver.phase = Phase.FOLLOWING  # airborne from the start: streaming only
-        drivers.append(driver)
-        links.append(link)
-    run = GroundStation(plan, drivers, clock, recorder, options)
     loop = LiveLoop(run)
     for track in run.tracks:
         track.takeoff_sent = True

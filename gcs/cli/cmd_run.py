@@ -196,10 +196,11 @@ def check_arguments(args: argparse.Namespace) -> None:
 
 def run_command(args: argparse.Namespace) -> int:  # noqa: C901 (over 15 branches: to split)
     from gcs.drivers import BackendUnavailable, driver_class
-    from gcs.drivers.base import DriverTiming, ExternalFleet, UavSpec
+    from gcs.drivers.base import DriverTiming, ExternalFleet
     from gcs.drivers.sim import SimFleet
+    from gcs.flight.assembly import assemble
     from gcs.flight.clock import MissionClock
-    from gcs.flight.core import GroundStation, RunOptions
+    from gcs.flight.core import RunOptions
     from gcs.flight.live import LiveLoop
     from gcs.recording.recording import FlightRecorder, LiveServerError
     from gcs.sim.medium_process import medium_setup
@@ -311,9 +312,7 @@ def run_command(args: argparse.Namespace) -> int:  # noqa: C901 (over 15 branche
 
         operator = OperatorSocket(socket_path_for(log_path))
         stack.callback(operator.close)
-        timing = DriverTiming(speedup=args.speedup)
-        landing_slots = formation.landing_slots
-        drivers = []
+        links = []
         for index, url in enumerate(urls):
             uav = index + 1
             try:
@@ -328,16 +327,7 @@ def run_command(args: argparse.Namespace) -> int:  # noqa: C901 (over 15 branche
                 ) from None
             stack.callback(link.close)
             signing.apply(link, uav)
-            spec = UavSpec(
-                uav_id=uav,
-                system_id=uav,
-                url=url,
-                origin=mission.origin,
-                start_slot=formation.start_slots[index],
-                goal_slot=landing_slots[index],
-                altitude=mission.altitude,
-            )
-            drivers.append(family(spec, link, timing))
+            links.append(link)
         view = None
         if stderr_tty and not args.json and not args.no_live:
             from gcs.cli.liveview import LiveView
@@ -355,11 +345,11 @@ def run_command(args: argparse.Namespace) -> int:  # noqa: C901 (over 15 branche
                 method=args.method,
             )
 
-        run = GroundStation(plan, drivers, clock, recorder, options, view=view, replan=replan)
+        timing = DriverTiming(speedup=args.speedup)
         # a full disk or an I/O error stops the file, never the flight: an event of the run
-        recorder.on_error = lambda text: run.note("error", "recording", text, time.monotonic())
-        if recorder.error is not None:  # it failed already, describing the mission
-            recorder.on_error(recorder.error)
+        run = assemble(
+            plan, links, family, timing, clock, recorder, options, view=view, replan=replan
+        )
         world = None
         if isinstance(fleet, SimFleet) and fleet.world is not None:
             from gcs.flight.lockstep import WorldSync

@@ -28,11 +28,12 @@ from pathlib import Path
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs.drivers.base import DriverTiming, UavSpec
+from gcs.drivers.base import DriverTiming
 from gcs.drivers.sim import SimDriver
 from gcs.flight.answers import OperatorAnswer
+from gcs.flight.assembly import assemble
 from gcs.flight.clock import MissionClock
-from gcs.flight.core import GroundStation, NullRecorder, RunOptions, RunResult
+from gcs.flight.core import NullRecorder, RunOptions, RunResult
 from gcs.flight.records import run_json_radio
 from gcs.planning import MissionPlan, plan_json
 from gcs.sim.medium_process import buildings_sight
@@ -280,23 +281,6 @@ class _LockstepMission:
             mavlink.MAVLink(None, srcSystem=uav, srcComponent=1) for uav in range(1, size + 1)
         ]
         self.links = [MemoryLink(f"memory:{uav}", uav) for uav in range(1, size + 1)]
-        landing_slots = formation.landing_slots
-        drivers = [
-            SimDriver(
-                UavSpec(
-                    uav_id=k + 1,
-                    system_id=k + 1,
-                    url=link.url,
-                    origin=origin,
-                    start_slot=formation.start_slots[k],
-                    goal_slot=landing_slots[k],
-                    altitude=mission.altitude,
-                ),
-                link,
-                DriverTiming(),
-            )
-            for k, link in enumerate(self.links)
-        ]
         self.clock = MissionClock(1.0, monotonic=lambda: 0.0, unix_ns=lambda: 0)
         run_options = RunOptions(
             setpoint_rate_hz=mission.sim.setpoint_rate_hz,
@@ -305,7 +289,10 @@ class _LockstepMission:
             return_when_on_station=True,  # nobody to ask for it
         )
         self.recorder = NullRecorder() if options.log is None else self._recorder(options.log)
-        self.station = GroundStation(plan, drivers, self.clock, self.recorder, run_options)
+        self.station = assemble(
+            plan, self.links, SimDriver, DriverTiming(), self.clock, self.recorder, run_options,
+            wall=lambda: self.fleet.sim_s,
+        )  # fmt: skip
         planned = plan.duration_s if plan.duration_s and math.isfinite(plan.duration_s) else 600
         if formation.stations is not None:  # out, the hold, and home
             dwells = [point.dwell_s for point in mission.stations]

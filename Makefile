@@ -43,6 +43,7 @@ bench: $(EXTRAS_STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check fleetline fleetwire gcs medium planner vehicles tests bench
 	$(BIN)/ruff format --check fleetline fleetwire gcs medium planner vehicles tests bench
+	$(BIN)/mypy
 
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis
+	rm -rf $(VENV) .pytest_cache .hypothesis .mypy_cache .ruff_cache

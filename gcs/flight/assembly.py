@@ -57,8 +57,7 @@ def assemble(
     specs = uav_specs(plan, [link.url for link in links])
     drivers = [family(spec, link, timing) for spec, link in zip(specs, links, strict=True)]
     station = GroundStation(plan, drivers, clock, recorder, options, view=view, replan=replan)
-    if hasattr(recorder, "on_error"):
-        recorder.on_error = lambda text: station.note("error", "recording", text, wall())
-        if recorder.error is not None:  # it failed already, describing the mission
-            recorder.on_error(recorder.error)
+    recorder.on_error = lambda text: station.note("error", "recording", text, wall())
+    if recorder.error is not None:  # it failed already, describing the mission
+        station.note("error", "recording", recorder.error, wall())
     return station

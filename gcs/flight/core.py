@@ -315,9 +315,12 @@ class Recorder(Protocol):
     """What the core records, as typed records (`gcs.flight.records`); `wall` is the loop's
     time of the thing recorded (gcs.recording.recording.FlightRecorder implements it).
     `keeps_samples` False: the per-UAV setpoint and state records would be thrown away, so the
-    core does not build them (the fast mode's `NullRecorder`: 60 k records a mission)."""
+    core does not build them (the fast mode's `NullRecorder`: 60 k records a mission).
+    `error`: why the recording stopped (None: it has not); `on_error` is told that once."""
 
     keeps_samples: bool
+    error: str | None
+    on_error: Callable[[str], None] | None
 
     def setpoint(self, record: SetpointRecord, wall: float) -> None: ...
 
@@ -382,9 +385,11 @@ class _Evaluation:
 
 
 class NullRecorder:
-    """Records nothing (the fast mode keeps its own time series)."""
+    """Records nothing (the fast mode keeps its own time series), so never fails."""
 
     keeps_samples = False
+    error: str | None = None
+    on_error: Callable[[str], None] | None = None
 
     def setpoint(self, record: SetpointRecord, wall: float) -> None:
         return None

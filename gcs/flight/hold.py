@@ -169,7 +169,7 @@ class HoldPolicy:
                     f"{self.hold_threshold_m:.2f} m (rho_c less the tracking allowance) "
                     "before it can close"
                 )
-            elif uav.silent_errors_m is not None:
+            elif uav.silent_errors_m is not None and uav.sample_time is not None:
                 if not self._silent_due(t, uav):
                     continue
                 now_m, next_m = uav.silent_errors_m
@@ -218,6 +218,7 @@ class HoldPolicy:
         before = 0.0
         if self.finished:
             last = self.finished[-1]
+            assert last.until is not None and last.duration_s is not None  # finished: ended
             if t - last.until < self.give_up_s:
                 before = last.held_before_s + last.duration_s
         self.current = Hold(t, stop_s, standing_s, tuple(reasons), before)

@@ -29,9 +29,10 @@ demo: $(STAMP)
 # then the flights, two files at a time: they wait on mission time more than they compute
 # (0.9 of a core for both workers), and lower their speed-up on a busy machine. One file per
 # worker (--dist loadfile), so a module's flight fixture flies once.
+# --durations: the slowest tests in every CI log, to keep CI under 15 minutes on a busy machine.
 test: $(EXTRAS_STAMP)
-	$(BIN)/python -m pytest -q -m "not slow" -n 2
-	$(BIN)/python -m pytest -q -m slow -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -m "not slow" -n 2 --durations=5
+	$(BIN)/python -m pytest -q -m slow -n 2 --dist loadfile --durations=15
 
 # Unit, core, property and conformance tests: no process started, no IP socket (< 90 s).
 test-fast: $(STAMP)

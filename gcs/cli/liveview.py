@@ -100,7 +100,7 @@ class LiveView:
             where = ""
         elif run.returned is not None:
             where = f"  [cyan]returning (from t={run.returned.effective_s:.1f} s)[/]"
-        elif run.on_station:
+        elif run.stations_watch.holding:
             where = "  [green]on station[/]"
         else:
             where = "  outbound"
@@ -145,7 +145,7 @@ class LiveView:
         parts = [header, table, distances, *events]
         if self.interactive:
             back = " | return [@T]" if stations and run.returned is None else ""
-            if stations and run.returned is None and run.on_station:
+            if stations and run.returned is None and run.stations_watch.holding:
                 back += " | relieve N"
             parts.append(Text(f"speed m/s [@T]{back} | land > {self._typed}_", style="bold"))
         return Group(*parts)

@@ -84,6 +84,7 @@ from gcs.flight.roster import Roster
 from gcs.flight.schedule import Schedule, ScheduleDecision, UavProgress
 from gcs.flight.silent import OnItsOwn, SentSetpoint, hold_errors
 from gcs.flight.stall import Resume, resume_point
+from gcs.flight.stations import StationWatch
 from gcs.geodesy import enu_to_geodetic
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
 from gcs.speed import (
@@ -494,12 +495,7 @@ class GroundStation:
         self.returned: ReturnRecord | None = None  # the return home, once asked
         self._hold: tuple[float, float] | None = None  # stopped on station: (from t, speed)
         self._planned_return_done = False  # the mission's own return was issued (or refused)
-        self.on_station = False  # every UAV holds its station now (until the return)
-        self._on_station_noted = False
-        self._on_station_s = np.zeros(size)  # per UAV, see `PointHeld`
-        self._last_station_tick: float | None = None
-        self._held_samples = 0
-        self._held_connected = 0
+        self.stations_watch = StationWatch(size, self.mission.safety_margin)  # time on station
         self._battery_noted: set[int] = set()  # UAVs whose low battery was acted on
         if self._station_xy is not None:
             planned = self._planned_return()
@@ -1180,29 +1176,22 @@ class GroundStation:
         """Time on station per UAV (its reported position within rho_c of its station while
         its virtual target holds there), the connectivity while everyone holds, and the event
         when everyone is on station."""
-        dt = 0.0 if self._last_station_tick is None else max(t - self._last_station_tick, 0.0)
-        self._last_station_tick = t
-        slots = self._station_xy
-        held = np.hypot(*(evaluation.virtual[0] - slots).T) <= DISTANCE_TOLERANCE
         reported = np.full((self.size, 2), np.nan)
         for index, driver in enumerate(self.drivers):
             position = driver.telemetry.position_enu
             if position is not None and not self.links.lost[index]:
                 reported[index] = position[:2]
-        with np.errstate(invalid="ignore"):
-            near = np.hypot(*(reported - slots).T) <= self.mission.safety_margin
-        self._on_station_s += dt * (held & near)
-        # everyone holds from S_out until UAV N leaves its station again, at 2 M - S_out
-        distance = float(evaluation.distances[0])
-        outbound = self.formation.outbound_distance
-        leaves = math.inf if self.returned is None else 2 * self.returned.distance - outbound
-        holding = outbound - DISTANCE_TOLERANCE <= distance <= leaves + DISTANCE_TOLERANCE
-        if holding and sampled:
-            self._held_samples += 1
-            self._held_connected += int(bool(self.safety.stats.last_connected))
-        self.on_station = holding
-        if holding and not self._on_station_noted:
-            self._on_station_noted = True
+        reached = self.stations_watch.update(
+            t,
+            self._station_xy,
+            evaluation.virtual[0],
+            reported,
+            float(evaluation.distances[0]),
+            self.formation.outbound_distance,
+            None if self.returned is None else self.returned.distance,
+            bool(self.safety.stats.last_connected) if sampled else None,
+        )
+        if reached:
             self._event(MonitorEvent(t, "info", "on_station", self._on_station_text(t)), now)
 
     def _on_station_text(self, t: float) -> str:
@@ -1226,11 +1215,10 @@ class GroundStation:
             PointHeld(
                 name=self.mission.stations[index].name,
                 uav=int(uav),
-                on_station_s=float(self._on_station_s[int(uav) - 1]),
+                on_station_s=float(self.stations_watch.on_station_s[int(uav) - 1]),
             )
             for index, uav in zip(route.order.tolist(), holders.tolist(), strict=True)
         )
-        held = self._held_connected / self._held_samples if self._held_samples else None
         reliefs = () if self.roster is None else self.roster.reliefs
         relieved = tuple(
             UavRelieved(
@@ -1239,14 +1227,14 @@ class GroundStation:
                 asked_s=relief.asked_s,
                 landing=(float(relief.plan.landing_xy[0]), float(relief.plan.landing_xy[1])),
                 landed_s=self.tracks[relief.index].landed_time,
-                on_station_s=float(self._on_station_s[relief.index]),
+                on_station_s=float(self.stations_watch.on_station_s[relief.index]),
             )
             for relief in reliefs
         )
         return StationsResult(
             points=points,
             return_s=None if self.returned is None else self.returned.effective_s,
-            held_connected_fraction=held,
+            held_connected_fraction=self.stations_watch.held_connected_fraction,
             relieved=relieved,
         )
 
@@ -1276,7 +1264,7 @@ class GroundStation:
                 f"UAV {other.index + 1} is being relieved (home at about "
                 f"t={other.plan.home_s:.2f} s): one relief at a time"
             )
-        if not (self._holding() and self.on_station):
+        if not (self._holding() and self.stations_watch.holding):
             raise ReliefRefused(
                 "a UAV is relieved from its station: wait until every UAV holds its station"
             )
@@ -1351,7 +1339,7 @@ class GroundStation:
         threshold = self.mission.relieve_below_pct
         if threshold is None or roster.active is not None:
             return
-        if not (self._holding() and self.on_station):
+        if not (self._holding() and self.stations_watch.holding):
             return
         for index, driver in enumerate(self.drivers):
             level = driver.telemetry.battery_remaining_pct

@@ -28,7 +28,7 @@ from typing import Any
 from rich.console import Group
 from rich.table import Table
 
-from gcs.flight.core import RunResult, StationsResult
+from gcs.flight.result import RunResult, StationsResult
 
 EXIT_COMPLETED, EXIT_ABORTED = 0, 1
 

@@ -56,7 +56,7 @@ import logging
 import math
 from collections import deque
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import NamedTuple, Protocol
 
 import numpy as np
@@ -67,7 +67,7 @@ from gcs.drivers.base import VEHICLE_REBOOT_JUMP_S, Driver, DriverEvent, Phase
 from gcs.drivers.limits import LimitExceeded, exceeded
 from gcs.flight.answers import AnswerResult, OperatorAnswer, OperatorCommand
 from gcs.flight.clock import MissionClock, VehicleClock, paused
-from gcs.flight.hold import Hold, HoldPolicy, UavState
+from gcs.flight.hold import HoldPolicy, UavState
 from gcs.flight.records import (
     MetricsRecord,
     RadioRecord,
@@ -80,10 +80,19 @@ from gcs.flight.records import (
     run_json_radio,
 )
 from gcs.flight.rejoin import RejoinPolicy
+from gcs.flight.result import (
+    PointHeld,
+    RunResult,
+    StationsResult,
+    UavRelieved,
+    completion,
+    landing_errors,
+    setpoint_timing,
+)
 from gcs.flight.roster import Roster
 from gcs.flight.schedule import Schedule, ScheduleDecision, UavProgress
 from gcs.flight.silent import OnItsOwn, SentSetpoint, hold_errors
-from gcs.flight.stall import Resume, resume_point
+from gcs.flight.stall import Resume, Stall, resume_point
 from gcs.flight.stations import StationWatch
 from gcs.geodesy import enu_to_geodetic
 from gcs.monitors import LinkMonitor, MonitorEvent, SafetyMonitor
@@ -192,103 +201,8 @@ class UavTrack:
     final_xy: np.ndarray | None = None
 
 
-@dataclass(frozen=True)
-class Stall:
-    """A stall of the loop: from `since` to `until` (the loop's time) nothing ran; the mission
-    clock stood at `stood_at` (the last tick); the UAVs stood where the formation was at
-    `paused_at` (never earlier); the clock resumed from `resumed_at` (half a smoothing window
-    later when a standing start was inserted), `held_back_s` mission seconds behind where it
-    would have been (negative: ahead, the inserted pause being longer than the stall)."""
-
-    since: float
-    until: float
-    stood_at: float
-    paused_at: float
-    resumed_at: float
-    held_back_s: float
-
-
-@dataclass(frozen=True)
-class PointHeld:
-    """One monitoring point of a stations mission (visiting order): the UAV that holds it
-    and the mission seconds its reported position was within rho_c of the point while its
-    virtual target held there."""
-
-    name: str
-    uav: int
-    on_station_s: float
-
-
-@dataclass(frozen=True)
-class UavRelieved:
-    """A UAV relieved from its station (`gcs relieve`, or its battery): asked at mission time
-    `asked_s` by `source`, landed on the start-row slot `landing` (at `landed_s`; None if it
-    had not landed), after `on_station_s` mission seconds on station."""
-
-    uav: int
-    source: str
-    asked_s: float
-    landing: tuple[float, float]
-    landed_s: float | None
-    on_station_s: float
-
-
-@dataclass(frozen=True)
-class StationsResult:
-    """What a stations mission reports: its points, the effective mission time of the return
-    (None: never returned), and the fraction of the connectivity samples taken while every
-    virtual target held its station (from S_out until the first UAV leaves for home, one
-    smoothing window after the return) at which every UAV was chained to a base station
-    (None: no such sample)."""
-
-    points: tuple[PointHeld, ...]
-    return_s: float | None
-    held_connected_fraction: float | None
-    relieved: tuple[UavRelieved, ...] = ()
-
-
 class ReturnRefused(FleetlineError, ValueError):
     """A return home that cannot be flown (the reason is the message)."""
-
-
-@dataclass
-class RunResult:
-    """Everything the summary reports."""
-
-    completed: bool
-    reason: str | None
-    fleet_size: int
-    duration_s: float | None
-    min_uav_uav_m: float | None
-    min_uav_obstacle_m: float | None
-    max_tracking_error_m: float | None
-    tracking_error_m: list[float | None]
-    control_error_m: list[float | None]
-    landing_error_m: list[float | None]
-    connected_fraction: float | None
-    speed_changes: list[dict]
-    #: ... by line of sight: every hop's chord clear of the buildings (docs/outputs.md)
-    los_connected_fraction: float | None
-    events: list[MonitorEvent]
-    phases: list[str]
-    smoothing_window_s: float
-    smoothing_error_m: float
-    noise_m: float | None
-    setpoints_sent: int
-    setpoint_rate_hz: float | None
-    setpoint_jitter_p99_ms: float | None
-    setpoint_period_ms: float
-    setpoint_max_gap_ms: float | None
-    ticks: int
-    interrupted: int
-    fatal: bool
-    radio: dict | None = None  # the radio medium's run JSON `radio` object, if one ran
-    stalls: list[Stall] = field(default_factory=list)  # stalls of the loop, held back or not
-    telemetry_shed: int = 0  # stale telemetry datagrams of backlogs, not decoded
-    #: The mission assumed more than an autopilot allows and was refused before take-off.
-    limits_refused: list[LimitExceeded] = field(default_factory=list)
-    stations: StationsResult | None = None  # stations missions only
-    holds: list[Hold] = field(default_factory=list)  # the formation held for a UAV behind
 
 
 class View(Protocol):
@@ -2090,37 +2004,25 @@ class GroundStation:
         stats = self.safety.stats
         takeoffs = [tr.takeoff_time for tr in self.tracks if tr.takeoff_time is not None]
         landings = [tr.landed_time for tr in self.tracks if tr.landed_time is not None]
-        landing_error = []
-        goal_slots = self._goal_slots()
-        for index, track in enumerate(self.tracks):
-            xy = track.final_xy
-            landing_error.append(None if xy is None else float(np.hypot(*(xy - goal_slots[index]))))
-        on_slots = all(e is not None and e < self.mission.safety_margin for e in landing_error)
-        completed = (
-            not self.aborting
-            and self.clock.anchored
-            and all(d.phase == Phase.LANDED for d in self.drivers)
-            and all(tr.land_sent for tr in self.tracks)
-            and on_slots
+        landing_error = landing_errors([tr.final_xy for tr in self.tracks], self._goal_slots())
+        completed, why_not = completion(
+            aborting=self.aborting,
+            started=self.clock.anchored,
+            all_landed=all(d.phase == Phase.LANDED for d in self.drivers),
+            all_told_to_land=all(tr.land_sent for tr in self.tracks),
+            landing_error_m=landing_error,
+            safety_margin=self.mission.safety_margin,
         )
         if not completed and self.reason is None:
-            self.reason = (
-                "a UAV landed off its arrival slot"
-                if not on_slots and all(d.phase == Phase.LANDED for d in self.drivers)
-                else "the mission did not complete"
-            )
+            self.reason = why_not
+        completed = completed and not self.fatal
         sampled = stats.samples > 0 or np.any(stats.max_tracking_error_m > 0)
-        walls = np.array(self._tick_walls)
-        periods = np.diff(walls) if len(walls) > 2 else np.zeros(0)
         nominal = self.tick_period_wall
-        jitter = (
-            float(np.percentile(np.abs(periods - nominal), 99) * 1000) if periods.size else None
-        )
-        rate = float(1.0 / periods.mean() / self.options.speedup) if periods.size else None
+        timing = setpoint_timing(self._tick_walls, nominal, self.options.speedup)
         noise = getattr(getattr(self.mission.sim, "noise", None), "position_m", None)
         return RunResult(
-            completed=bool(completed and not self.fatal),
-            reason=None if (completed and not self.fatal) else self.reason,
+            completed=completed,
+            reason=None if completed else self.reason,
             fleet_size=self.size,
             duration_s=(max(landings) - min(takeoffs)) if takeoffs and landings else None,
             min_uav_uav_m=_finite(stats.min_uav_uav_m),
@@ -2142,10 +2044,10 @@ class GroundStation:
             smoothing_error_m=self.smoothing_bound(),
             noise_m=noise,
             setpoints_sent=sum(d.setpoints_sent for d in self.drivers),
-            setpoint_rate_hz=rate,
-            setpoint_jitter_p99_ms=jitter,
+            setpoint_rate_hz=timing.rate_hz,
+            setpoint_jitter_p99_ms=timing.jitter_p99_ms,
             setpoint_period_ms=nominal * 1000,
-            setpoint_max_gap_ms=float(periods.max() * 1000) if periods.size else None,
+            setpoint_max_gap_ms=timing.max_gap_ms,
             ticks=self.ticks,
             interrupted=self.interrupts,
             fatal=self.fatal,

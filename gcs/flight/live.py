@@ -13,8 +13,9 @@ import time
 from collections.abc import Callable
 
 from gcs.drivers.base import Fleet
-from gcs.flight.core import GroundStation, RunResult
+from gcs.flight.core import GroundStation
 from gcs.flight.lockstep import WorldSync
+from gcs.flight.result import RunResult
 from gcs.speed import OperatorSocket
 from gcs.transport.forward import Forwarder
 

@@ -34,6 +34,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
+
+@dataclass(frozen=True)
+class Stall:
+    """A stall of the loop: from `since` to `until` (the loop's time) nothing ran; the mission
+    clock stood at `stood_at` (the last tick); the UAVs stood where the formation was at
+    `paused_at` (never earlier); the clock resumed from `resumed_at` (half a smoothing window
+    later when a standing start was inserted), `held_back_s` mission seconds behind where it
+    would have been (negative: ahead, the inserted pause being longer than the stall)."""
+
+    since: float
+    until: float
+    stood_at: float
+    paused_at: float
+    resumed_at: float
+    held_back_s: float
+
+
 #: Pauses tried, as fractions of the smoothing window (1: a standing start; 0: fly on).
 PAUSE_FRACTIONS = (1.0, 0.75, 0.5, 0.25, 0.0)
 

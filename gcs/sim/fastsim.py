@@ -33,8 +33,9 @@ from gcs.drivers.sim import SimDriver
 from gcs.flight.answers import OperatorAnswer
 from gcs.flight.assembly import assemble
 from gcs.flight.clock import MissionClock
-from gcs.flight.core import NullRecorder, RunOptions, RunResult
+from gcs.flight.core import NullRecorder, RunOptions
 from gcs.flight.records import run_json_radio
+from gcs.flight.result import RunResult
 from gcs.planning import MissionPlan, plan_json
 from gcs.sim.medium_process import buildings_sight
 from gcs.summary import run_json

@@ -10,7 +10,7 @@ import re
 
 from rich.console import Console
 
-from gcs.flight.core import RunResult
+from gcs.flight.result import RunResult
 from gcs.monitors import MonitorEvent
 from gcs.summary import summary_renderable
 

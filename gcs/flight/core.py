@@ -65,6 +65,7 @@ from fleetline.errors import FleetlineError
 from fleetwire.messages import parse_clock_slipped
 from gcs.drivers.base import VEHICLE_REBOOT_JUMP_S, Driver, DriverEvent, Phase
 from gcs.drivers.limits import LimitExceeded, exceeded
+from gcs.flight import relief as relief_policy
 from gcs.flight.answers import AnswerResult, OperatorAnswer, OperatorCommand
 from gcs.flight.clock import MissionClock, VehicleClock, paused
 from gcs.flight.hold import HoldPolicy, UavState
@@ -146,10 +147,6 @@ _HOLDING = (
     "every UAV holds its station: the formation stands still until the return (gcs return); "
     "speed changes apply from then on"
 )
-#: Share of the vehicle's acceleration a relief's moves use (they start and stop at rest).
-RELIEF_ACCELERATION_SHARE = 0.5
-#: Who relieves a UAV (`ReliefRecord.source`), in words.
-_RELIEF_SOURCES = {"operator": "the operator", "battery": "its battery is low"}
 #: Who brings a stations mission's fleet home (`ReturnRecord.source`), in words.
 _RETURN_SOURCES = {
     "schedule": "the mission's return.at",
@@ -410,7 +407,7 @@ class GroundStation:
         self._hold: tuple[float, float] | None = None  # stopped on station: (from t, speed)
         self._planned_return_done = False  # the mission's own return was issued (or refused)
         self.stations_watch = StationWatch(size, self.mission.safety_margin)  # time on station
-        self._battery_noted: set[int] = set()  # UAVs whose low battery was acted on
+        self.batteries = relief_policy.BatteryWatch(self.mission.relieve_below_pct)  # (stations)
         if self._station_xy is not None:
             planned = self._planned_return()
             if planned is None:
@@ -1164,36 +1161,29 @@ class GroundStation:
             raise ReliefRefused(
                 "this mission has no stations: its UAVs fly from A to B together, none alone"
             )
-        if uav is None or not 1 <= uav <= self.size:
-            raise ReliefRefused(f"there is no UAV {uav} (the fleet has UAVs 1 to {self.size})")
-        if self.aborting:
-            raise ReliefRefused(f"the fleet is landing ({self.reason})")
-        if self.returned is not None:
-            raise ReliefRefused("the fleet is returning home already")
-        if roster.relieved[uav - 1]:
-            raise ReliefRefused(f"UAV {uav} was relieved already")
-        if roster.active is not None:
-            other = roster.active
-            raise ReliefRefused(
-                f"UAV {other.index + 1} is being relieved (home at about "
-                f"t={other.plan.home_s:.2f} s): one relief at a time"
-            )
-        if not (self._holding() and self.stations_watch.holding):
-            raise ReliefRefused(
-                "a UAV is relieved from its station: wait until every UAV holds its station"
-            )
-        if self.frozen_by is not None:
-            raise ReliefRefused(f"the formation is frozen ({self.frozen_by})")
-        unavailable = self._unavailable()
-        if unavailable:
-            index, why = next(iter(unavailable.items()))
-            raise ReliefRefused(f"UAV {index + 1} is not flying the formation ({why})")
+        active = roster.active
+        why = relief_policy.refusal(
+            uav,
+            relief_policy.ReliefState(
+                size=self.size,
+                landing=self.reason if self.aborting else None,
+                returning=self.returned is not None,
+                relieved=self._relieved(),
+                active=None if active is None else (active.index, active.plan.home_s),
+                holding=self._holding() and self.stations_watch.holding,
+                frozen_by=self.frozen_by,
+                unavailable=self._unavailable(),
+            ),
+        )
+        if why is not None:
+            raise ReliefRefused(why)
+        assert uav is not None and self._hold is not None  # (refusal: 1..N, holding)
         vehicle = self.mission.vehicle
         plan = roster.plan(
             uav,
             t,
             self._hold[1],
-            RELIEF_ACCELERATION_SHARE * vehicle.max_acceleration,
+            relief_policy.RELIEF_ACCELERATION_SHARE * vehicle.max_acceleration,
             self.options.climb_rate_mps,
         )
         self.formation = roster.adopt(plan, source, t)
@@ -1224,7 +1214,7 @@ class GroundStation:
         )
         x, y = plan.landing_xy
         text = (
-            f"UAV {uav} relieved ({_RELIEF_SOURCES[source]}): it climbs "
+            f"UAV {uav} relieved ({relief_policy.RELIEF_SOURCES[source]}): it climbs "
             f"{plan.lane_offset:.1f} m above the chain, {closing}, it flies home above the "
             f"route and lands on the start-row slot ({x:.1f}, {y:.1f}) at about "
             f"t={plan.home_s:.2f} s"
@@ -1240,37 +1230,36 @@ class GroundStation:
         if active is not None:
             index, plan = active.index, active.plan
             driver, track = self.drivers[index], self.tracks[index]
-            if not track.land_sent and t >= plan.home_s:
-                offset = self._slot_offset(index, t)
-                if (
-                    offset <= self.options.landing_tolerance_m
-                    or t >= plan.home_s + self.options.landing_settle_s
-                ):
-                    track.land_sent = True
-                    driver.land(now)
+            if not track.land_sent and relief_policy.lands_now(
+                t,
+                plan.home_s,
+                self._slot_offset(index, t),
+                self.options.landing_tolerance_m,
+                self.options.landing_settle_s,
+            ):
+                track.land_sent = True
+                driver.land(now)
             if driver.phase in (Phase.LANDED, Phase.FAILED):
                 roster.active = None
-        threshold = self.mission.relieve_below_pct
-        if threshold is None or roster.active is not None:
+        if roster.active is not None or not (self._holding() and self.stations_watch.holding):
             return
-        if not (self._holding() and self.stations_watch.holding):
-            return
-        for index, driver in enumerate(self.drivers):
-            level = driver.telemetry.battery_remaining_pct
-            if level is None or level >= threshold or index in self._battery_noted:
-                continue
-            if roster.relieved[index]:
-                continue
-            self._battery_noted.add(index)
+        levels = [driver.telemetry.battery_remaining_pct for driver in self.drivers]
+        while (index := self.batteries.due(levels, self._relieved())) is not None:
             try:
                 self._relieve(t, now, index + 1, "battery")
                 return
             except ReliefRefused as refused:
                 text = (
-                    f"UAV {index + 1}: battery {level:g} % below {threshold:g} %, but it "
-                    f"stays: {refused}"
+                    f"UAV {index + 1}: battery {levels[index]:g} % below "
+                    f"{self.batteries.threshold_pct:g} %, but it stays: {refused}"
                 )
                 self._event(MonitorEvent(t, "warning", "relief_refused", text, index + 1), now)
+
+    def _relieved(self) -> frozenset[int]:
+        """The UAVs (0-based) relieved so far."""
+        if self.roster is None:
+            return frozenset()
+        return frozenset(int(i) for i in np.flatnonzero(self.roster.relieved))
 
     def _deferred(self, speed: float, t: float, source: str, now: float) -> bool:
         """While the formation is frozen, a scheduled or leader change is not flown: it becomes

@@ -400,7 +400,8 @@ class GroundStation:
         )
         self._hold_speed = 0.0  # the speed the formation resumes with after the hold
         # the setpoints of the last ticks (mission time, UAV indices, horizontal position,
-        # velocity, acceleration sent): where a silent UAV flies on (gcs.flight.silent)
+        # velocity, acceleration sent), one per mission instant (25 s at 10 Hz): where a silent
+        # UAV flies on (gcs.flight.silent)
         self._sent: deque[tuple[float, np.ndarray, ...]] = deque(maxlen=256)
         # stations missions
         self.returned: ReturnRecord | None = None  # the return home, once asked
@@ -1546,6 +1547,8 @@ class GroundStation:
         acceleration = np.column_stack([reference.accelerations[0, idx], vertical[:, 2]])
         takes = [self.drivers[i].accepts_acceleration_feedforward for i in streaming]
         sent_acceleration = reference.accelerations[0, idx] * np.array(takes, float)[:, None]
+        if self._sent and self._sent[-1][0] >= t:
+            self._sent.pop()  # the clock stood still (held for the world): one per instant
         self._sent.append((t, idx, xy.copy(), vxy.copy(), sent_acceleration))
         # Python lists once per tick: the per-UAV loop below is the hot path.
         positions, velocities = position.tolist(), velocity.tolist()

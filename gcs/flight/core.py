@@ -403,6 +403,9 @@ class GroundStation:
         # velocity, acceleration sent), one per mission instant (25 s at 10 Hz): where a silent
         # UAV flies on (gcs.flight.silent)
         self._sent: deque[tuple[float, np.ndarray, ...]] = deque(maxlen=256)
+        self._takes_acceleration = np.array(
+            [[float(d.accepts_acceleration_feedforward)] for d in drivers]
+        )  # (N, 1): 0 where the autopilot is sent no acceleration
         # stations missions
         self.returned: ReturnRecord | None = None  # the return home, once asked
         self._hold: tuple[float, float] | None = None  # stopped on station: (from t, speed)
@@ -1545,11 +1548,10 @@ class GroundStation:
         position = np.column_stack([xy, up])
         velocity = np.column_stack([vxy, vertical[:, 1]])
         acceleration = np.column_stack([reference.accelerations[0, idx], vertical[:, 2]])
-        takes = [self.drivers[i].accepts_acceleration_feedforward for i in streaming]
-        sent_acceleration = reference.accelerations[0, idx] * np.array(takes, float)[:, None]
+        sent_acceleration = reference.accelerations[0, idx] * self._takes_acceleration[idx]
         if self._sent and self._sent[-1][0] >= t:
             self._sent.pop()  # the clock stood still (held for the world): one per instant
-        self._sent.append((t, idx, xy.copy(), vxy.copy(), sent_acceleration))
+        self._sent.append((t, idx, xy, vxy, sent_acceleration))  # (indexed: copies)
         # Python lists once per tick: the per-UAV loop below is the hot path.
         positions, velocities = position.tolist(), velocity.tolist()
         accelerations, virtuals, geo = acceleration.tolist(), virtual.tolist(), geodetic.tolist()

@@ -119,6 +119,24 @@ def test_a_stall_with_a_uav_not_heard_lately_resumes_where_it_was_heading(plan, 
     assert run.stalls and run.run_json["max_tracking_error_m"] < 4.0
 
 
+@pytest.mark.parametrize("late_s", [0.05, 0.3])
+def test_a_stall_whose_telemetry_was_lost_waits_for_where_the_uavs_stand(plan, late_s):
+    """The ground station stops 3 s and what every UAV sends meanwhile is lost (a socket
+    buffer that overflowed while the process was stopped, as in a live fault test): at the
+    wake-up its samples are from before the stall. Resolved at once, the formation resumed
+    where those samples were heading (0.5 s into the stall) while the UAVs had flown 1 s on and
+    braked: 8.5 m here (4.5 m on examples/small.yaml; 5.03 m, past rho_c, in a live flight of
+    the fault tests). It now waits, the clock still frozen, for a fresh sample of each, and
+    resumes where they stand (1.45 s into the stall): 2.2 m, no hold."""
+    cuts = tuple((uav, 21.0, 24.0 + late_s) for uav in (1, 2, 3, 4))
+    run = fly(plan, gcs_stalls=((21.0, 24.0),), link_cuts=cuts)
+    (stall,) = run.stalls
+    assert stall.paused_at >= stall.stood_at + 1.0  # they flew on about 1 s, then braked
+    assert "hold" not in kinds(run)
+    assert run.run_json["completed"] is True
+    assert np.nanmax(run.tracking_error_m) < 3.0
+
+
 def test_a_stall_longer_than_the_gcs_failsafe_resumes_where_the_uavs_stand(plan):
     """The ground station stops for 6.5 s (no lockstep: SITL, real vehicles): longer than the
     vehicles' GCS failsafe (5 s), so they brake (BRAKE, out of guided flight) before the

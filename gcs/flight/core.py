@@ -1571,8 +1571,9 @@ class GroundStation:
         self.current_speed = float(self.profile.speed_at(max(t, 0.0)))  # commanded, for the view
         position = np.column_stack([xy, up])
         velocity = np.column_stack([vxy, vertical[:, 1]])
-        acceleration = np.column_stack([reference.accelerations[0, idx], vertical[:, 2]])
-        sent_acceleration = reference.accelerations[0, idx] * self._takes_acceleration[idx]
+        axy = reference.accelerations[0, idx]
+        acceleration = np.column_stack([axy, vertical[:, 2]])
+        sent_acceleration = axy * self._takes_acceleration[idx]
         if self._sent and self._sent[-1][0] >= t:
             self._sent.pop()  # the clock stood still (held for the world): one per instant
         self._sent.append((t, idx, xy, vxy, sent_acceleration))  # (indexed: copies)

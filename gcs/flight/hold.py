@@ -15,16 +15,19 @@ A UAV following the formation is *behind* when (checked every tick, on mission t
   ahead (it flew its last setpoints on through a stall of the ground station) closes on a
   target that keeps moving, and a hold would widen its gap (measured after a 1 s stall while a
   UAV joined at 8 m/s: 5.5 m with the hold, 2.9 m without);
-* its latest position sample is more than `lag_s` mission seconds older than the mission
-  clock (its telemetry, or its process's clock, lags the mission: the ground station is
-  steering it blind).
+* it has not been heard for a while (`UavState.silent_errors_m`, the core's dead reckoning
+  of it, `gcs.flight.silent`): waiting a tick would not bring the formation's targets closer
+  to where it stops flying its last setpoint on alone, and the wait would break the threshold
+  or its latest sample is more than `lag_s` mission seconds old;
+* otherwise, its latest position sample is more than `lag_s` mission seconds older than the
+  mission clock (its telemetry, or its process's clock, lags the mission: the ground station
+  is steering it blind).
 
 A setpoint timeout the UAV reports is not a cause of its own: measured in the fast mode (a UAV
-starved of setpoints for 1.5 s and 2 s at 8 m/s), holding on the report raised the worst
-tracking error from 1.49 m to 4.19 m and from 1.66 m to 6.23 m. The vehicle carries its last
-setpoint on for its timeout, then brakes more gently than the formation's reference stops, so
-it overshoots a formation that stopped; a formation that flies on is where it rejoins. A UAV
-that stays stopped shows as a growing tracking error, the first cause above.
+starved of setpoints for 1.5 s and 2 s at 8 m/s, its telemetry still arriving, with the
+vehicles' former 3 m/s^2 brake), holding on the report raised the worst tracking error from
+1.49 m to 4.19 m and from 1.66 m to 6.23 m. The ground station still hears where such a UAV
+is: one that stays stopped shows as a growing tracking error, the first cause above.
 
 Then the formation *holds*: the speed profile drops to 0 at the earliest instant the smoothed
 reference can take it without a jump (t + w/2, the leading edge of the smoothing window), so every

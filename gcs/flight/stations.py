@@ -46,21 +46,22 @@ class StationWatch:
         positions: np.ndarray,
         distance: float,
         outbound: float,
-        returned_at: float | None,
+        return_distance: float | None,
         connected: bool | None,
     ) -> bool:
         """One tick at mission time `t`: `slots` (N, 2) the stations, `targets` (N, 2) the
         virtual targets, `positions` (N, 2) the reported positions (NaN: none, or the link
-        lost), `distance` the formation distance, `outbound` S_out, `returned_at` M (None: no
-        return yet), `connected` the connectivity sample of this tick (None: none taken).
-        True the first tick every UAV is on station."""
+        lost), `distance` the formation distance, `outbound` S_out, `return_distance` M, the
+        formation distance the return was asked at (None: no return yet), `connected` the
+        connectivity sample of this tick (None: none taken). True the first tick every UAV
+        is on station."""
         dt = 0.0 if self.last_tick is None else max(t - self.last_tick, 0.0)
         self.last_tick = t
         held = np.hypot(*(targets - slots).T) <= DISTANCE_TOLERANCE
         with np.errstate(invalid="ignore"):
             near = np.hypot(*(positions - slots).T) <= self.safety_margin
         self.on_station_s += dt * (held & near)
-        leaves = math.inf if returned_at is None else 2 * returned_at - outbound
+        leaves = math.inf if return_distance is None else 2 * return_distance - outbound
         self.holding = outbound - DISTANCE_TOLERANCE <= distance <= leaves + DISTANCE_TOLERANCE
         if self.holding and connected is not None:
             self.held_samples += 1

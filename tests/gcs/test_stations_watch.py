@@ -15,9 +15,9 @@ SLOTS = np.array([[0.0, 0.0], [100.0, 0.0]])
 OUTBOUND = 500.0
 
 
-def tick(watch, t, positions, distance=OUTBOUND, returned_at=None, connected=True):
+def tick(watch, t, positions, distance=OUTBOUND, return_distance=None, connected=True):
     return watch.update(
-        t, SLOTS, SLOTS.copy(), np.array(positions), distance, OUTBOUND, returned_at, connected
+        t, SLOTS, SLOTS.copy(), np.array(positions), distance, OUTBOUND, return_distance, connected
     )
 
 
@@ -39,7 +39,7 @@ def test_the_fleet_holds_from_s_out_until_the_first_uav_leaves_for_home():
     tick(watch, 2.0, near, connected=False)
     tick(watch, 2.5, near, connected=None)  # no sample this tick: not tallied
     # the return asked at M = 520: the first UAV leaves at 2 M - S_out = 540
-    tick(watch, 3.0, near, distance=539.0, returned_at=520.0, connected=True)
+    tick(watch, 3.0, near, distance=539.0, return_distance=520.0, connected=True)
     assert watch.holding and watch.held_connected_fraction == 2 / 3
-    tick(watch, 4.0, near, distance=541.0, returned_at=520.0, connected=False)
+    tick(watch, 4.0, near, distance=541.0, return_distance=520.0, connected=False)
     assert not watch.holding and watch.held_connected_fraction == 2 / 3

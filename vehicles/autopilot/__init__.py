@@ -19,9 +19,8 @@ UNSUPPORTED. Differences from ArduCopter, on purpose: refusals always carry a ST
 reason; a stream of position + velocity targets (the fleetline ground station's) that stops for
 ``setpoint_timeout_s`` (GUID_TIMEOUT, 1 s by default here, 3 s in ArduCopter) makes the vehicle
 brake (at WPNAV_ACCEL, as ArduCopter's guided mode) and hold at its stopping point rather than
-at the last target, saying so (it stays in
-GUIDED and follows again when setpoints resume); losing the GCS (no valid message from its
-system id) makes it hold (BRAKE), then LAND.
+at the last target, saying so (it stays in GUIDED and follows again when setpoints resume);
+losing the GCS (no valid message from its system id) makes it hold (BRAKE), then LAND.
 
 Timeouts count simulated time and never fire before a wall-clock floor (``wall_floor_s``), so a
 busy machine at a high speedup does not trip them. See :mod:`vehicles.fleet_speed` for the

@@ -1,6 +1,6 @@
-"""The autopilot's failsafes: the setpoint timeout in GUIDED (brake at WPNAV_ACCEL and hold; follow again when
-setpoints resume, PX4's offboard-loss behaviour) and the GCS failsafe (hold in BRAKE, then
-LAND; armed by the GCS's first HEARTBEAT, cleared by any message from the GCS).
+"""The autopilot's failsafes: the setpoint timeout in GUIDED (brake at WPNAV_ACCEL and hold;
+follow again when setpoints resume, PX4's offboard-loss behaviour) and the GCS failsafe (hold
+in BRAKE, then LAND; armed by the GCS's first HEARTBEAT, cleared by any message from the GCS).
 
 Every timeout counts simulated time and never fires before a wall-clock floor
 (``FailsafeConfig.wall_floor_s``), so a busy machine at a high speedup does not trip them.
